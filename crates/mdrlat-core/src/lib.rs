@@ -1,0 +1,18 @@
+//! Shared vocabulary of mdrlat.
+//!
+//! Everything here is used by both the simulator and the real robot, so it is the single
+//! source of truth for sim-to-real: the action table (paper Table 1), the observation
+//! layout, the normalisation of SPEC §2, and the seeded random number generator.
+//! No heavy dependencies: this crate builds in a second.
+
+pub mod action;
+pub mod npy;
+pub mod obs;
+pub mod rng;
+
+pub use action::{Action, TABLE_1, Velocity};
+pub use obs::{
+    DEPTH_COLS, DEPTH_LEN, DEPTH_ROWS, FRAME_STACK, FrameStack, LASER_BEAMS, ODOM_HISTORY,
+    normalize_depth, normalize_laser,
+};
+pub use rng::Rng;

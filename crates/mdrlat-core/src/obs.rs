@@ -1,0 +1,149 @@
+//! Observation layout and the one normalisation shared by the simulator and the robot.
+//!
+//! Sensors produce frames in metres. The network sees them normalised as in the authors'
+//! code (SPEC §2): laser / 5.6; depth clamped to [0, 10] m, then / 5. Both the training code
+//! and the ROS node call [`normalize_laser`] and [`normalize_depth`], so sim-to-real never
+//! depends on two copies agreeing.
+
+/// Number of laser beams per scan.
+pub const LASER_BEAMS: usize = 512;
+/// Depth image rows.
+pub const DEPTH_ROWS: usize = 128;
+/// Depth image columns.
+pub const DEPTH_COLS: usize = 160;
+/// Pixels per depth image.
+pub const DEPTH_LEN: usize = DEPTH_ROWS * DEPTH_COLS;
+/// Frames stacked in one observation (t−3 … t).
+pub const FRAME_STACK: usize = 4;
+/// Steps of odometry history (t−2, t−1, t) predicted by the auxiliary task.
+pub const ODOM_HISTORY: usize = 3;
+
+/// Laser ranges are divided by this (the laser's maximum range, metres).
+pub const LASER_NORM_M: f32 = 5.6;
+/// Depth is clamped to `[0, DEPTH_CLAMP_M]` metres before scaling.
+pub const DEPTH_CLAMP_M: f32 = 10.0;
+/// Depth is divided by this after clamping.
+pub const DEPTH_NORM_M: f32 = 5.0;
+
+/// Normalises laser ranges in metres into `out` (SPEC §2: range / 5.6).
+/// Non-finite ranges (which a sane source never gives) map to 1.0, "nothing seen".
+///
+/// # Panics
+/// If the slices differ in length (a programming error, not an input error).
+pub fn normalize_laser(ranges_m: &[f32], out: &mut [f32]) {
+    assert_eq!(ranges_m.len(), out.len(), "normalize_laser: length mismatch");
+    for (o, &r) in out.iter_mut().zip(ranges_m) {
+        *o = if r.is_finite() { r / LASER_NORM_M } else { 1.0 };
+    }
+}
+
+/// Normalises depth in metres into `out` (SPEC §2: clamp to [0, 10] m, then / 5).
+/// NaN (no return) maps to 0, as the sensor's own "no reading" value.
+///
+/// # Panics
+/// If the slices differ in length (a programming error, not an input error).
+pub fn normalize_depth(depth_m: &[f32], out: &mut [f32]) {
+    assert_eq!(depth_m.len(), out.len(), "normalize_depth: length mismatch");
+    for (o, &d) in out.iter_mut().zip(depth_m) {
+        // `clamp` propagates NaN; treat it as no return.
+        let d = if d.is_nan() { 0.0 } else { d.clamp(0.0, DEPTH_CLAMP_M) };
+        *o = d / DEPTH_NORM_M;
+    }
+}
+
+/// A ring buffer of the last [`FRAME_STACK`] frames of one sensor.
+///
+/// Pushing a frame writes one frame in place; nothing is shifted or reallocated. Frames are
+/// read oldest to newest with [`FrameStack::frame`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameStack {
+    data: Box<[f32]>,
+    frame_len: usize,
+    /// Index of the slot holding the newest frame.
+    head: usize,
+}
+
+impl FrameStack {
+    /// A stack of zero frames of `frame_len` values each.
+    pub fn new(frame_len: usize) -> Self {
+        Self { data: vec![0.0; frame_len * FRAME_STACK].into_boxed_slice(), frame_len, head: 0 }
+    }
+
+    /// Values per frame.
+    pub fn frame_len(&self) -> usize {
+        self.frame_len
+    }
+
+    /// Advances the ring and returns the slot of the new newest frame, to be written in place.
+    pub fn push_slot(&mut self) -> &mut [f32] {
+        self.head = (self.head + 1) % FRAME_STACK;
+        let n = self.frame_len;
+        &mut self.data[self.head * n..(self.head + 1) * n]
+    }
+
+    /// Copies the newest frame into all slots (the stack after a reset).
+    pub fn fill_with_latest(&mut self) {
+        let n = self.frame_len;
+        let (head, latest) = (self.head, self.latest().to_vec());
+        for k in 0..FRAME_STACK {
+            if k != head {
+                self.data[k * n..(k + 1) * n].copy_from_slice(&latest);
+            }
+        }
+    }
+
+    /// Frame `k` of the stack, `0` the oldest (t−3) and `FRAME_STACK − 1` the newest (t).
+    pub fn frame(&self, k: usize) -> &[f32] {
+        assert!(k < FRAME_STACK, "frame index {k} out of range");
+        let slot = (self.head + 1 + k) % FRAME_STACK;
+        &self.data[slot * self.frame_len..(slot + 1) * self.frame_len]
+    }
+
+    /// The newest frame.
+    pub fn latest(&self) -> &[f32] {
+        self.frame(FRAME_STACK - 1)
+    }
+
+    /// Writes the stack oldest-first through `f` (e.g. a normaliser) into `out`, which must
+    /// hold `FRAME_STACK * frame_len` values: the `[4, …]` network input layout.
+    pub fn write_stacked(&self, out: &mut [f32], f: impl Fn(&[f32], &mut [f32])) {
+        let n = self.frame_len;
+        assert_eq!(out.len(), n * FRAME_STACK, "write_stacked: output length");
+        for (k, chunk) in out.chunks_exact_mut(n).enumerate() {
+            f(self.frame(k), chunk);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normalisation_follows_the_authors_code() {
+        let mut out = [0.0; 3];
+        normalize_laser(&[0.0, 2.8, 5.6], &mut out);
+        assert_eq!(out, [0.0, 0.5, 1.0]);
+        let mut out = [0.0; 5];
+        normalize_depth(&[0.0, 2.5, 10.0, 42.0, f32::NAN], &mut out);
+        assert_eq!(out, [0.0, 0.5, 2.0, 2.0, 0.0]);
+    }
+
+    #[test]
+    fn frame_stack_is_a_ring_read_oldest_first() {
+        let mut s = FrameStack::new(2);
+        s.push_slot().copy_from_slice(&[1.0, 1.0]);
+        s.fill_with_latest();
+        for k in 0..FRAME_STACK {
+            assert_eq!(s.frame(k), &[1.0, 1.0]);
+        }
+        for i in 2..=6 {
+            s.push_slot().copy_from_slice(&[i as f32, -(i as f32)]);
+        }
+        let firsts: Vec<f32> = (0..FRAME_STACK).map(|k| s.frame(k)[0]).collect();
+        assert_eq!(firsts, [3.0, 4.0, 5.0, 6.0]);
+        let mut out = vec![0.0; 8];
+        s.write_stacked(&mut out, |a, b| b.copy_from_slice(a));
+        assert_eq!(out, [3.0, -3.0, 4.0, -4.0, 5.0, -5.0, 6.0, -6.0]);
+    }
+}
