@@ -47,11 +47,7 @@ impl Action {
 
     /// The action with this index, or `None` if `index >= 10`.
     pub const fn new(index: usize) -> Option<Self> {
-        if index < Self::COUNT {
-            Some(Self(index as u8))
-        } else {
-            None
-        }
+        if index < Self::COUNT { Some(Self(index as u8)) } else { None }
     }
 
     /// The action's index in Table 1.
@@ -71,9 +67,9 @@ impl Action {
 
     /// The largest |v| and |ω| of Table 1: the limits a real robot's commands are clamped to.
     pub fn command_limits() -> Velocity {
-        TABLE_1.iter().fold(Velocity::default(), |m, c| {
-            Velocity::new(m.v.max(c.v.abs()), m.w.max(c.w.abs()))
-        })
+        TABLE_1
+            .iter()
+            .fold(Velocity::default(), |m, c| Velocity::new(m.v.max(c.v.abs()), m.w.max(c.w.abs())))
     }
 }
 

@@ -16,3 +16,12 @@ pub use obs::{
     normalize_depth, normalize_laser,
 };
 pub use rng::Rng;
+
+/// Robot constants shared by the simulator and the world checks (turtlebot2 / Kobuki).
+pub mod robot {
+    /// Footprint radius, metres.
+    pub const RADIUS_M: f32 = 0.177;
+    /// Body height, metres: obstacles whose height interval overlaps `[0, BODY_HEIGHT_M]`
+    /// can hit the bumper.
+    pub const BODY_HEIGHT_M: f32 = 0.45;
+}

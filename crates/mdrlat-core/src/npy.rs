@@ -18,8 +18,7 @@ pub fn write_f32(mut w: impl Write, shape: &[usize], data: &[f32]) -> io::Result
     let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
     let shape_txt =
         if shape.len() == 1 { format!("({},)", dims[0]) } else { format!("({})", dims.join(", ")) };
-    let mut header =
-        format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_txt}, }}");
+    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape_txt}, }}");
     // Magic (6) + version (2) + header length (2) + header + '\n' is a multiple of 64.
     let unpadded = 10 + header.len() + 1;
     header.push_str(&" ".repeat((64 - unpadded % 64) % 64));

@@ -42,7 +42,10 @@ impl Aabb {
     }
     /// True if the rectangles share any point.
     pub fn intersects(&self, o: &Aabb) -> bool {
-        self.min.x <= o.max.x && o.min.x <= self.max.x && self.min.y <= o.max.y && o.min.y <= self.max.y
+        self.min.x <= o.max.x
+            && o.min.x <= self.max.x
+            && self.min.y <= o.max.y
+            && o.min.y <= self.max.y
     }
     /// The smallest rectangle holding both.
     pub fn union(&self, o: &Aabb) -> Aabb {

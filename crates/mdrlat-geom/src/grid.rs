@@ -71,8 +71,12 @@ impl Grid {
     }
 
     fn cell_span(&self, b: &Aabb) -> (usize, usize, usize, usize) {
-        let cx = |x: f32| (((x - self.origin.x) / self.cell_m).floor().max(0.0) as usize).min(self.nx - 1);
-        let cy = |y: f32| (((y - self.origin.y) / self.cell_m).floor().max(0.0) as usize).min(self.ny - 1);
+        let cx = |x: f32| {
+            (((x - self.origin.x) / self.cell_m).floor().max(0.0) as usize).min(self.nx - 1)
+        };
+        let cy = |y: f32| {
+            (((y - self.origin.y) / self.cell_m).floor().max(0.0) as usize).min(self.ny - 1)
+        };
         (cx(b.min.x), cy(b.min.y), cx(b.max.x), cy(b.max.y))
     }
 

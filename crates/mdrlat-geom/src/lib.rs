@@ -23,4 +23,4 @@ pub use math::{Pose2, Vec2};
 pub use prism::Prism;
 pub use query::extent::Extent;
 pub use query::fan::{Fan, FanHits, PreparedShape};
-pub use shape::{Cuboid, Cylinder, ConvexPolygon, Shape, ShapeError};
+pub use shape::{ConvexPolygon, Cuboid, Cylinder, Shape, ShapeError};

@@ -74,7 +74,8 @@ mod tests {
 
     #[test]
     fn box_straight_ahead_and_behind() {
-        let b = Shape::Cuboid(Cuboid::new(Vec2::new(2.0, 0.0), Vec2::new(2.0, 2.0), 0.0).expect("box"));
+        let b =
+            Shape::Cuboid(Cuboid::new(Vec2::new(2.0, 0.0), Vec2::new(2.0, 2.0), 0.0).expect("box"));
         match b.angular_extent(Vec2::ZERO) {
             Extent::Arc { lo, hi } => {
                 assert!((lo + FRAC_PI_4).abs() < 1e-6 && (hi - FRAC_PI_4).abs() < 1e-6, "{lo} {hi}")
@@ -82,7 +83,9 @@ mod tests {
             Extent::Full => panic!("not inside"),
         }
         // Behind the viewpoint the interval straddles ±π and is returned unwrapped.
-        let b = Shape::Cuboid(Cuboid::new(Vec2::new(-2.0, 0.0), Vec2::new(2.0, 2.0), 0.0).expect("box"));
+        let b = Shape::Cuboid(
+            Cuboid::new(Vec2::new(-2.0, 0.0), Vec2::new(2.0, 2.0), 0.0).expect("box"),
+        );
         match b.angular_extent(Vec2::ZERO) {
             Extent::Arc { lo, hi } => {
                 assert!((hi - lo - PI / 2.0).abs() < 1e-5, "{lo} {hi}");

@@ -236,7 +236,9 @@ mod tests {
             }),
             (c(), 0.2f32..2.0, 3usize..9, -3.0f32..3.0).prop_map(|((x, y), r, n, rot)| {
                 let pts: Vec<Vec2> = (0..n)
-                    .map(|i| Vec2::new(x, y) + Vec2::from_angle(rot + i as f32 * TAU / n as f32) * r)
+                    .map(|i| {
+                        Vec2::new(x, y) + Vec2::from_angle(rot + i as f32 * TAU / n as f32) * r
+                    })
                     .collect();
                 Shape::Polygon(ConvexPolygon::new(&pts).expect("poly"))
             }),
@@ -277,7 +279,9 @@ mod tests {
     #[test]
     fn wall_ahead_gives_analytic_ranges() {
         // A wall face at x = 2 in front of a sensor at the origin: range = 2 / cos(angle).
-        let wall = Shape::Cuboid(Cuboid::new(Vec2::new(2.5, 0.0), Vec2::new(1.0, 20.0), 0.0).expect("wall"));
+        let wall = Shape::Cuboid(
+            Cuboid::new(Vec2::new(2.5, 0.0), Vec2::new(1.0, 20.0), 0.0).expect("wall"),
+        );
         let fan = uniform_fan(91, 1.0);
         let mut hits = FanHits::with_len(fan.len());
         wall.prepare(&Pose2::default()).cast(&fan, 0..fan.len(), &mut hits);

@@ -115,7 +115,9 @@ impl Shape {
     pub fn translated(&self, by: Vec2) -> Shape {
         match self {
             Shape::Cuboid(s) => Shape::Cuboid(Cuboid::from_parts(s.center + by, s.half, s.yaw)),
-            Shape::Cylinder(s) => Shape::Cylinder(Cylinder { center: s.center + by, radius: s.radius }),
+            Shape::Cylinder(s) => {
+                Shape::Cylinder(Cylinder { center: s.center + by, radius: s.radius })
+            }
             Shape::Polygon(s) => Shape::Polygon(s.translated(by)),
         }
     }

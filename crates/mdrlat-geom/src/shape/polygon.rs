@@ -35,7 +35,8 @@ impl ConvexPolygon {
         if area2 < 0.0 {
             pts.reverse();
         }
-        let scale = Aabb::from_points(pts.iter().copied()).map_or(1.0, |b| b.size().length().max(1e-3));
+        let scale =
+            Aabb::from_points(pts.iter().copied()).map_or(1.0, |b| b.size().length().max(1e-3));
         if area2.abs() <= 1e-6 * scale * scale {
             return Err(ShapeError::NotConvex { index: 0 });
         }
@@ -102,8 +103,7 @@ impl ConvexPolygon {
 
     /// Bounding rectangle.
     pub fn aabb(&self) -> Aabb {
-        Aabb::from_points(self.points.iter().copied())
-            .unwrap_or(Aabb::new(Vec2::ZERO, Vec2::ZERO))
+        Aabb::from_points(self.points.iter().copied()).unwrap_or(Aabb::new(Vec2::ZERO, Vec2::ZERO))
     }
 
     /// Distance from a point (0 inside).
