@@ -83,6 +83,8 @@ impl Fan {
 }
 
 /// A shape moved into a sensor's frame, ready for fan casts from the sensor origin.
+// Lives on the stack for one cast; boxing the polygon table would allocate per obstacle per step.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum PreparedShape {
     /// Box: ray origin in the box frame, rotation sensor → box, half extents.
