@@ -1,0 +1,248 @@
+//! Simulator settings. Defaults are SPEC §2 (the paper's turtlebot2 with a Hokuyo-class
+//! laser and a Kinect v1). Every field can be overridden from a TOML config; unknown keys
+//! are rejected.
+
+use serde::{Deserialize, Serialize};
+
+/// All simulator settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimConfig {
+    /// Control period in seconds (5 Hz, as the authors' code).
+    pub dt_s: f32,
+    /// Physics sub-steps per control period (robot and pedestrians move and collisions are
+    /// checked at each).
+    pub substeps: u32,
+    /// Steps after which an episode is truncated (a time limit, not a terminal state).
+    pub max_episode_steps: u32,
+    /// The robot.
+    pub robot: RobotConfig,
+    /// The 2D laser.
+    pub laser: LaserConfig,
+    /// The depth camera.
+    pub depth: DepthConfig,
+    /// The reward (paper eqs. 3–6).
+    pub reward: RewardConfig,
+    /// Extra clearance, metres, between the robot footprint and any obstacle or pedestrian
+    /// at a reset pose.
+    pub spawn_clearance_m: f32,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            dt_s: 0.2,
+            substeps: 4,
+            max_episode_steps: 500,
+            robot: RobotConfig::default(),
+            laser: LaserConfig::default(),
+            depth: DepthConfig::default(),
+            reward: RewardConfig::default(),
+            spawn_clearance_m: 0.1,
+        }
+    }
+}
+
+/// Turtlebot2 / Kobuki: a differential-drive disc.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RobotConfig {
+    /// Footprint radius, metres.
+    pub radius_m: f32,
+    /// Body height, metres: obstacles overlapping `[0, body_height_m]` hit the bumper.
+    pub body_height_m: f32,
+    /// Linear acceleration limit, m/s².
+    pub max_linear_accel: f32,
+    /// Angular acceleration limit, rad/s².
+    pub max_angular_accel: f32,
+}
+
+impl Default for RobotConfig {
+    fn default() -> Self {
+        Self {
+            radius_m: mdrlat_core::robot::RADIUS_M,
+            body_height_m: mdrlat_core::robot::BODY_HEIGHT_M,
+            max_linear_accel: 1.0,
+            max_angular_accel: 2.0,
+        }
+    }
+}
+
+/// The 2D laser range finder (512 beams, fixed by the observation layout).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LaserConfig {
+    /// Field of view, degrees, centred ahead.
+    pub fov_deg: f32,
+    /// Height of the scan plane above the floor, metres.
+    pub height_m: f32,
+    /// Maximum range, metres; beams with no return read this.
+    pub max_range_m: f32,
+    /// Standard deviation of additive Gaussian range noise, metres (0: off).
+    pub noise_std_m: f32,
+}
+
+impl Default for LaserConfig {
+    fn default() -> Self {
+        Self { fov_deg: 270.0, height_m: 0.40, max_range_m: 5.6, noise_std_m: 0.0 }
+    }
+}
+
+/// The depth camera (128 x 160 pixels, fixed by the observation layout), Kinect-v1-like.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DepthConfig {
+    /// Horizontal field of view, degrees.
+    pub hfov_deg: f32,
+    /// Vertical field of view, degrees.
+    pub vfov_deg: f32,
+    /// Height of the optical centre above the floor, metres (zero pitch).
+    pub height_m: f32,
+    /// Reads closer than this are 0, as the Kinect reports them.
+    pub min_range_m: f32,
+    /// Reads farther than this are 0 (no return).
+    pub max_range_m: f32,
+    /// Depth noise: standard deviation at 1 m, growing with depth², metres (0: off).
+    pub noise_std_at_1m: f32,
+    /// Probability that a pixel drops out (reads 0), per pixel and frame (0: off).
+    pub dropout_prob: f32,
+}
+
+impl Default for DepthConfig {
+    fn default() -> Self {
+        Self {
+            hfov_deg: 58.0,
+            vfov_deg: 45.0,
+            height_m: 0.30,
+            min_range_m: 0.4,
+            max_range_m: 10.0,
+            noise_std_at_1m: 0.0,
+            dropout_prob: 0.0,
+        }
+    }
+}
+
+/// Paper eqs. (3)–(6).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RewardConfig {
+    /// Reward of a collision; the episode terminates.
+    pub collision: f32,
+    /// λ_c of eq. (4).
+    pub lambda_c: f32,
+    /// λ_d of eq. (5) (negative: a penalty).
+    pub lambda_d: f32,
+    /// λ_ω of eq. (6) (negative: a penalty).
+    pub lambda_w: f32,
+    /// d_min below this (metres) is a collision (eq. 4).
+    pub collision_range_m: f32,
+    /// d_min below this (metres) is penalised as too close (eq. 5).
+    pub near_range_m: f32,
+}
+
+impl Default for RewardConfig {
+    fn default() -> Self {
+        Self {
+            collision: -10.0,
+            lambda_c: 2.0,
+            lambda_d: -0.05,
+            lambda_w: -0.05,
+            collision_range_m: 0.2,
+            near_range_m: 0.4,
+        }
+    }
+}
+
+/// A setting that cannot work.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("sim config: {field}: {problem}")]
+pub struct ConfigError {
+    /// The offending field, e.g. `laser.max_range_m`.
+    pub field: &'static str,
+    /// What is wrong.
+    pub problem: String,
+}
+
+impl SimConfig {
+    /// Checks every value is usable.
+    ///
+    /// # Errors
+    /// The first field out of range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let positive: [(&'static str, f32); 12] = [
+            ("dt_s", self.dt_s),
+            ("robot.radius_m", self.robot.radius_m),
+            ("robot.body_height_m", self.robot.body_height_m),
+            ("robot.max_linear_accel", self.robot.max_linear_accel),
+            ("robot.max_angular_accel", self.robot.max_angular_accel),
+            ("laser.fov_deg", self.laser.fov_deg),
+            ("laser.height_m", self.laser.height_m),
+            ("laser.max_range_m", self.laser.max_range_m),
+            ("depth.hfov_deg", self.depth.hfov_deg),
+            ("depth.vfov_deg", self.depth.vfov_deg),
+            ("depth.height_m", self.depth.height_m),
+            ("depth.max_range_m", self.depth.max_range_m),
+        ];
+        for (field, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(ConfigError { field, problem: format!("must be positive, got {v}") });
+            }
+        }
+        let non_negative: [(&'static str, f32); 5] = [
+            ("laser.noise_std_m", self.laser.noise_std_m),
+            ("depth.min_range_m", self.depth.min_range_m),
+            ("depth.noise_std_at_1m", self.depth.noise_std_at_1m),
+            ("spawn_clearance_m", self.spawn_clearance_m),
+            ("reward.collision_range_m", self.reward.collision_range_m),
+        ];
+        for (field, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(ConfigError { field, problem: format!("must be >= 0, got {v}") });
+            }
+        }
+        if self.substeps == 0 {
+            return Err(ConfigError { field: "substeps", problem: "must be at least 1".into() });
+        }
+        if self.max_episode_steps == 0 {
+            return Err(ConfigError {
+                field: "max_episode_steps",
+                problem: "must be at least 1".into(),
+            });
+        }
+        if self.laser.fov_deg > 360.0 {
+            return Err(ConfigError {
+                field: "laser.fov_deg",
+                problem: format!("must be <= 360, got {}", self.laser.fov_deg),
+            });
+        }
+        if self.depth.hfov_deg >= 180.0 || self.depth.vfov_deg >= 180.0 {
+            return Err(ConfigError {
+                field: "depth.hfov_deg",
+                problem: "fields of view must be < 180 degrees".into(),
+            });
+        }
+        if !(0.0..=1.0).contains(&self.depth.dropout_prob) {
+            return Err(ConfigError {
+                field: "depth.dropout_prob",
+                problem: format!("must be in [0, 1], got {}", self.depth.dropout_prob),
+            });
+        }
+        if self.depth.min_range_m >= self.depth.max_range_m {
+            return Err(ConfigError {
+                field: "depth.min_range_m",
+                problem: "must be below depth.max_range_m".into(),
+            });
+        }
+        let r = &self.reward;
+        if ![r.collision, r.lambda_c, r.lambda_d, r.lambda_w, r.near_range_m]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            return Err(ConfigError {
+                field: "reward",
+                problem: "all values must be finite".into(),
+            });
+        }
+        Ok(())
+    }
+}

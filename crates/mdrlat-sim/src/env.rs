@@ -1,0 +1,397 @@
+//! The environment, Gymnasium-style: `reset(seed)` then `step(action)` returning the
+//! observation, the reward, `terminated` and `truncated` (never a merged `done`), and info.
+
+use crate::config::{ConfigError, SimConfig};
+use crate::pedestrians::{self, PedestrianState};
+use crate::reward::{RewardTerms, reward};
+use crate::robot::RobotState;
+use crate::scene::StaticScene;
+use crate::sensors::{DepthCamera, Laser};
+use mdrlat_core::{Action, DEPTH_LEN, FrameStack, LASER_BEAMS, ODOM_HISTORY, Rng, Velocity};
+use mdrlat_geom::{GridScratch, Pose2, Prism, Vec2};
+use mdrlat_world::World;
+use std::sync::Arc;
+
+/// Attempts at drawing a collision-free reset pose before giving up.
+const SPAWN_ATTEMPTS: usize = 10_000;
+
+/// What the agent sees: the last 4 frames of each sensor (metres, oldest first) and the
+/// true velocities of the last 3 steps for the auxiliary task.
+///
+/// Frames are raw metres; the network input is made with `mdrlat_core::normalize_laser` /
+/// `normalize_depth` (`FrameStack::write_stacked`), the one normalisation shared with the
+/// real robot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// Laser ranges, 4 x 512, metres.
+    pub laser: FrameStack,
+    /// Depth images, 4 x 128 x 160, metres (0: no reading).
+    pub depth: FrameStack,
+    /// True `(v, ω)` at `t−2`, `t−1`, `t`.
+    pub odom: [Velocity; ODOM_HISTORY],
+}
+
+impl Observation {
+    /// An all-zero observation.
+    pub fn zeros() -> Self {
+        Self {
+            laser: FrameStack::new(LASER_BEAMS),
+            depth: FrameStack::new(DEPTH_LEN),
+            odom: [Velocity::default(); ODOM_HISTORY],
+        }
+    }
+}
+
+/// Why an episode ended in a collision.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Collision {
+    /// The footprint touched static obstacle `obstacle` (index in the world file).
+    Bumper {
+        /// Index of the obstacle.
+        obstacle: usize,
+    },
+    /// Pedestrian `index` and the robot touched.
+    Pedestrian {
+        /// Index of the pedestrian.
+        index: usize,
+    },
+    /// The smallest laser range fell below the collision range (eq. 4).
+    LaserRange,
+}
+
+/// Diagnostics of one step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepInfo {
+    /// Steps taken in this episode, including this one.
+    pub step: u32,
+    /// Robot pose after the step.
+    pub pose: Pose2,
+    /// True velocity after the step.
+    pub velocity: Velocity,
+    /// The commanded velocity (Table 1).
+    pub command: Velocity,
+    /// Smallest laser range, metres.
+    pub d_min: f32,
+    /// Set when the step ended in a collision.
+    pub collision: Option<Collision>,
+    /// The reward's terms.
+    pub reward_terms: RewardTerms,
+}
+
+/// The result of [`Env::step`].
+#[derive(Debug)]
+pub struct Step<'a> {
+    /// The observation after the step.
+    pub observation: &'a Observation,
+    /// Paper eq. (3).
+    pub reward: f32,
+    /// A collision ended the episode: do not bootstrap.
+    pub terminated: bool,
+    /// The time limit ended the episode: bootstrap from `observation`.
+    pub truncated: bool,
+    /// Diagnostics.
+    pub info: StepInfo,
+}
+
+/// Errors of the environment.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SimError {
+    /// The configuration is unusable.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// No collision-free reset pose was found.
+    #[error(
+        "world '{world}': no collision-free start pose found in {attempts} attempts (spawn regions blocked?)"
+    )]
+    NoFreePose {
+        /// World name.
+        world: String,
+        /// Attempts made.
+        attempts: usize,
+    },
+    /// `step` was called before `reset` or after the episode ended.
+    #[error("step() called on an episode that has ended (or never started): call reset() first")]
+    NeedsReset,
+    /// A VecEnv was given the wrong number of actions.
+    #[error("expected {expected} actions, got {got}")]
+    ActionCount {
+        /// Environments.
+        expected: usize,
+        /// Actions given.
+        got: usize,
+    },
+}
+
+/// One simulated robot in one world.
+#[derive(Debug, Clone)]
+pub struct Env {
+    scene: Arc<StaticScene>,
+    config: SimConfig,
+    robot: RobotState,
+    pedestrians: Vec<PedestrianState>,
+    dynamic: Vec<Prism>,
+    laser: Laser,
+    depth: DepthCamera,
+    obs: Observation,
+    /// Spawn poses and pedestrian starts.
+    rng: Rng,
+    /// Sensor noise (its own stream: turning noise on never shifts spawn poses).
+    noise_rng: Rng,
+    steps: u32,
+    w_prev: f32,
+    running: bool,
+    scratch: GridScratch,
+    buf: Vec<u32>,
+}
+
+impl Env {
+    /// An environment over an indexed scene (shared between environments).
+    ///
+    /// # Errors
+    /// An invalid configuration.
+    pub fn new(scene: Arc<StaticScene>, config: SimConfig) -> Result<Self, SimError> {
+        config.validate()?;
+        Ok(Self {
+            laser: Laser::new(&config.laser),
+            depth: DepthCamera::new(&config.depth),
+            scene,
+            config,
+            robot: RobotState::default(),
+            pedestrians: Vec::new(),
+            dynamic: Vec::new(),
+            obs: Observation::zeros(),
+            rng: Rng::seed_from_u64(0),
+            noise_rng: Rng::derive(0, 1),
+            steps: 0,
+            w_prev: 0.0,
+            running: false,
+            scratch: GridScratch::default(),
+            buf: Vec::new(),
+        })
+    }
+
+    /// An environment over `world`.
+    ///
+    /// # Errors
+    /// An invalid configuration.
+    pub fn from_world(world: World, config: SimConfig) -> Result<Self, SimError> {
+        let scene = Arc::new(StaticScene::new(Arc::new(world), &config));
+        Self::new(scene, config)
+    }
+
+    /// Starts an episode at a random collision-free pose in the spawn regions. `Some(seed)`
+    /// reseeds every random stream (the only way to seed); `None` continues the streams.
+    ///
+    /// # Errors
+    /// No collision-free pose could be drawn.
+    pub fn reset(&mut self, seed: Option<u64>) -> Result<&Observation, SimError> {
+        self.reset_with(seed, None)
+    }
+
+    /// Like [`Env::reset`], but starts at `pose` when given (no collision check: used for
+    /// fixed evaluation starts and for looking at a chosen pose).
+    ///
+    /// # Errors
+    /// No collision-free pose could be drawn.
+    pub fn reset_with(
+        &mut self,
+        seed: Option<u64>,
+        pose: Option<Pose2>,
+    ) -> Result<&Observation, SimError> {
+        if let Some(seed) = seed {
+            self.rng = Rng::derive(seed, 0);
+            self.noise_rng = Rng::derive(seed, 1);
+        }
+        self.pedestrians = pedestrians::reset(&self.scene.world.pedestrians, &mut self.rng);
+        let pose = match pose {
+            Some(p) => p,
+            None => self.sample_pose()?,
+        };
+        self.robot = RobotState { pose, velocity: Velocity::default() };
+        self.steps = 0;
+        self.w_prev = 0.0;
+        self.obs.odom = [Velocity::default(); ODOM_HISTORY];
+        self.sense();
+        self.obs.laser.fill_with_latest();
+        self.obs.depth.fill_with_latest();
+        self.running = true;
+        Ok(&self.obs)
+    }
+
+    fn sample_pose(&mut self) -> Result<Pose2, SimError> {
+        let world = &self.scene.world;
+        let total: f32 = world.spawn.iter().map(|r| r.area()).sum();
+        let clearance = self.config.robot.radius_m + self.config.spawn_clearance_m;
+        for _ in 0..SPAWN_ATTEMPTS {
+            let mut pick = self.rng.uniform() as f32 * total;
+            let region = world
+                .spawn
+                .iter()
+                .find(|r| {
+                    pick -= r.area();
+                    pick <= 0.0
+                })
+                .unwrap_or(&world.spawn[world.spawn.len() - 1]);
+            let p = Vec2::new(
+                self.rng.range_f32(region.min.x, region.max.x),
+                self.rng.range_f32(region.min.y, region.max.y),
+            );
+            let yaw = self.rng.range_f32(-std::f32::consts::PI, std::f32::consts::PI);
+            let blocked_static =
+                self.scene.body_contact(p, clearance, &mut self.scratch, &mut self.buf).is_some();
+            let blocked_ped = self
+                .pedestrians
+                .iter()
+                .zip(&world.pedestrians)
+                .any(|(st, spec)| (st.position - p).length() < clearance + spec.radius);
+            if !blocked_static && !blocked_ped {
+                return Ok(Pose2::new(p.x, p.y, yaw));
+            }
+        }
+        Err(SimError::NoFreePose { world: world.name.clone(), attempts: SPAWN_ATTEMPTS })
+    }
+
+    /// Renders both sensors at the current state into the next frame slots.
+    fn sense(&mut self) {
+        pedestrians::write_prisms(
+            &self.scene.world.pedestrians,
+            &self.pedestrians,
+            &mut self.dynamic,
+        );
+        let pose = self.robot.pose;
+        self.laser.scan(
+            &self.scene,
+            &self.dynamic,
+            &pose,
+            &mut self.noise_rng,
+            self.obs.laser.push_slot(),
+        );
+        self.depth.capture(
+            &self.scene,
+            &self.dynamic,
+            &pose,
+            &mut self.noise_rng,
+            self.obs.depth.push_slot(),
+        );
+    }
+
+    fn contact(&mut self) -> Option<Collision> {
+        let p = self.robot.pose.position();
+        let r = self.config.robot.radius_m;
+        if let Some(obstacle) = self.scene.body_contact(p, r, &mut self.scratch, &mut self.buf) {
+            return Some(Collision::Bumper { obstacle });
+        }
+        let specs = &self.scene.world.pedestrians;
+        self.pedestrians
+            .iter()
+            .zip(specs)
+            .position(|(st, spec)| (st.position - p).length() < r + spec.radius)
+            .map(|index| Collision::Pedestrian { index })
+    }
+
+    /// Applies `action` for one control period (0.2 s).
+    ///
+    /// # Errors
+    /// [`SimError::NeedsReset`] before the first reset or after the episode ended.
+    pub fn step(&mut self, action: Action) -> Result<Step<'_>, SimError> {
+        if !self.running {
+            return Err(SimError::NeedsReset);
+        }
+        let command = action.command();
+        let sub_dt = self.config.dt_s / self.config.substeps as f32;
+        let mut collision = None;
+        for _ in 0..self.config.substeps {
+            pedestrians::advance(&self.scene.world.pedestrians, &mut self.pedestrians, sub_dt);
+            self.robot.advance(command, &self.config.robot, sub_dt);
+            collision = self.contact();
+            if collision.is_some() {
+                break;
+            }
+        }
+        self.sense();
+        let d_min = self.obs.laser.latest().iter().copied().fold(f32::INFINITY, f32::min);
+        if collision.is_none() && d_min < self.config.reward.collision_range_m {
+            collision = Some(Collision::LaserRange);
+        }
+        let velocity = self.robot.velocity;
+        self.obs.odom.rotate_left(1);
+        self.obs.odom[ODOM_HISTORY - 1] = velocity;
+        let terms = reward(&self.config.reward, collision.is_some(), velocity, self.w_prev, d_min);
+        self.w_prev = velocity.w;
+        self.steps += 1;
+        let terminated = collision.is_some();
+        let truncated = !terminated && self.steps >= self.config.max_episode_steps;
+        self.running = !(terminated || truncated);
+        Ok(Step {
+            observation: &self.obs,
+            reward: terms.total(),
+            terminated,
+            truncated,
+            info: StepInfo {
+                step: self.steps,
+                pose: self.robot.pose,
+                velocity,
+                command,
+                d_min,
+                collision,
+                reward_terms: terms,
+            },
+        })
+    }
+
+    /// The current observation.
+    pub fn observation(&self) -> &Observation {
+        &self.obs
+    }
+
+    /// Swaps the current observation with `other` (used by `VecEnv` to keep a final
+    /// observation without copying frames).
+    pub(crate) fn swap_observation(&mut self, other: &mut Observation) {
+        std::mem::swap(&mut self.obs, other);
+    }
+
+    /// The robot's pose.
+    pub fn pose(&self) -> Pose2 {
+        self.robot.pose
+    }
+
+    /// Pedestrian centres, radii and heights, for pictures.
+    pub fn pedestrian_discs(&self) -> Vec<(Vec2, f32, f32)> {
+        self.pedestrians
+            .iter()
+            .zip(&self.scene.world.pedestrians)
+            .map(|(st, spec)| (st.position, spec.radius, spec.height))
+            .collect()
+    }
+
+    /// The world.
+    pub fn world(&self) -> &World {
+        &self.scene.world
+    }
+
+    /// The indexed scene.
+    pub fn scene(&self) -> &Arc<StaticScene> {
+        &self.scene
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// The laser (beam angles, settings).
+    pub fn laser(&self) -> &Laser {
+        &self.laser
+    }
+
+    /// The depth camera (column angles, settings).
+    pub fn depth_camera(&self) -> &DepthCamera {
+        &self.depth
+    }
+
+    /// Steps taken in the current episode.
+    pub fn episode_steps(&self) -> u32 {
+        self.steps
+    }
+}

@@ -1,0 +1,200 @@
+//! Pedestrians: cylinders walking their waypoints, deterministic under a seed.
+//!
+//! Each walks towards its next waypoint at its speed; at the last waypoint it turns back
+//! (or, with `loop`, goes on to the first). If another pedestrian blocks its way it waits,
+//! and after `wait_s` turns back. Pedestrians do not avoid the robot: walking into it is a
+//! collision (SPEC §2). Pedestrians are updated in index order, so results are deterministic.
+
+use mdrlat_core::Rng;
+use mdrlat_geom::{Cylinder, Prism, Shape, Vec2};
+use mdrlat_world::PedestrianSpec;
+
+/// The moving state of one pedestrian.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PedestrianState {
+    /// Centre, world frame.
+    pub position: Vec2,
+    /// Index of the waypoint walked to.
+    pub target: usize,
+    /// +1 walking forward through the waypoints, −1 backward.
+    pub direction: i32,
+    /// Time spent blocked so far, seconds.
+    pub waited_s: f32,
+}
+
+/// Places every pedestrian at a random point of its path, walking a random way.
+pub fn reset(specs: &[PedestrianSpec], rng: &mut Rng) -> Vec<PedestrianState> {
+    specs
+        .iter()
+        .map(|spec| {
+            let n = spec.waypoints.len();
+            let segments = if spec.looped { n } else { n - 1 };
+            let seg = rng.below(segments);
+            let (a, b) = (spec.waypoints[seg], spec.waypoints[(seg + 1) % n]);
+            let f = rng.uniform() as f32;
+            let forward = spec.looped || rng.below(2) == 0;
+            let (target, direction) = if forward { ((seg + 1) % n, 1) } else { (seg, -1) };
+            PedestrianState { position: a + (b - a) * f, target, direction, waited_s: 0.0 }
+        })
+        .collect()
+}
+
+fn next_target(spec: &PedestrianSpec, st: &mut PedestrianState) {
+    let n = spec.waypoints.len();
+    if spec.looped {
+        st.target = (st.target + 1) % n;
+        return;
+    }
+    let next = st.target as i32 + st.direction;
+    if next < 0 || next >= n as i32 {
+        st.direction = -st.direction;
+    }
+    st.target = (st.target as i32 + st.direction) as usize;
+}
+
+fn turn_back(spec: &PedestrianSpec, st: &mut PedestrianState) {
+    let n = spec.waypoints.len();
+    if spec.looped {
+        st.target = (st.target + n - 1) % n;
+        // A looped walker turning back keeps walking its loop backwards from here on.
+        st.direction = -st.direction;
+    } else {
+        st.direction = -st.direction;
+        st.target = (st.target as i32 + st.direction).clamp(0, n as i32 - 1) as usize;
+    }
+}
+
+/// Moves every pedestrian by `dt` seconds.
+pub fn advance(specs: &[PedestrianSpec], states: &mut [PedestrianState], dt: f32) {
+    for i in 0..states.len() {
+        let spec = &specs[i];
+        let mut st = states[i];
+        let mut budget = spec.speed * dt;
+        // Walk through as many waypoints as this step reaches.
+        for _ in 0..spec.waypoints.len() + 1 {
+            let goal = spec.waypoints[st.target];
+            let to = goal - st.position;
+            let dist = to.length();
+            let step = budget.min(dist);
+            let next = if dist > 0.0 { st.position + to * (step / dist) } else { st.position };
+            let blocked = states.iter().enumerate().any(|(k, o)| {
+                k != i && {
+                    let gap = spec.radius + specs[k].radius;
+                    let (d_next, d_now) =
+                        ((next - o.position).length(), (st.position - o.position).length());
+                    d_next < gap && d_next < d_now
+                }
+            });
+            if blocked {
+                st.waited_s += dt;
+                if st.waited_s >= spec.wait_s {
+                    st.waited_s = 0.0;
+                    turn_back(spec, &mut st);
+                }
+                break;
+            }
+            st.waited_s = 0.0;
+            st.position = next;
+            budget -= step;
+            if step < dist || budget <= 0.0 {
+                break;
+            }
+            let step_back = st;
+            next_target(spec, &mut st);
+            if st.target == step_back.target {
+                break;
+            }
+        }
+        states[i] = st;
+    }
+}
+
+/// Writes each pedestrian as a cylinder prism into `out` (reusing its storage).
+pub fn write_prisms(specs: &[PedestrianSpec], states: &[PedestrianState], out: &mut Vec<Prism>) {
+    out.clear();
+    out.extend(specs.iter().zip(states).map(|(spec, st)| {
+        Prism::new(
+            Shape::Cylinder(Cylinder { center: st.position, radius: spec.radius }),
+            0.0,
+            spec.height,
+        )
+    }));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn walker(looped: bool) -> PedestrianSpec {
+        PedestrianSpec {
+            waypoints: vec![Vec2::new(0.0, 0.0), Vec2::new(2.0, 0.0), Vec2::new(2.0, 2.0)],
+            speed: 1.0,
+            radius: 0.25,
+            height: 1.7,
+            looped,
+            wait_s: 1.0,
+        }
+    }
+
+    #[test]
+    fn walks_at_speed_and_turns_back_at_the_end() {
+        let specs = [walker(false)];
+        let mut st =
+            [PedestrianState { position: Vec2::ZERO, target: 1, direction: 1, waited_s: 0.0 }];
+        advance(&specs, &mut st, 0.5);
+        assert!((st[0].position - Vec2::new(0.5, 0.0)).length() < 1e-6);
+        advance(&specs, &mut st, 2.0); // 2 m: corner at (2,0), then 0.5 m up
+        assert!((st[0].position - Vec2::new(2.0, 0.5)).length() < 1e-5, "{:?}", st[0]);
+        advance(&specs, &mut st, 2.0); // 1.5 m to the end, 0.5 m back
+        assert!((st[0].position - Vec2::new(2.0, 1.5)).length() < 1e-5, "{:?}", st[0]);
+        assert_eq!(st[0].direction, -1);
+    }
+
+    #[test]
+    fn loops_when_asked() {
+        let specs = [walker(true)];
+        let mut st = [PedestrianState {
+            position: Vec2::new(2.0, 2.0),
+            target: 0,
+            direction: 1,
+            waited_s: 0.0,
+        }];
+        let diag = 8f32.sqrt();
+        advance(&specs, &mut st, diag + 0.5);
+        assert!((st[0].position - Vec2::new(0.5, 0.0)).length() < 1e-4, "{:?}", st[0]);
+    }
+
+    #[test]
+    fn blocked_walkers_wait_then_turn_back() {
+        let spec = walker(false);
+        let specs = [spec.clone(), spec];
+        let mut st = [
+            PedestrianState {
+                position: Vec2::new(0.5, 0.0),
+                target: 1,
+                direction: 1,
+                waited_s: 0.0,
+            },
+            PedestrianState {
+                position: Vec2::new(1.0, 0.0),
+                target: 0,
+                direction: -1,
+                waited_s: 0.0,
+            },
+        ];
+        advance(&specs, &mut st, 0.2);
+        assert_eq!(st[0].position, Vec2::new(0.5, 0.0), "blocked: waits");
+        for _ in 0..5 {
+            advance(&specs, &mut st, 0.2);
+        }
+        assert_eq!(st[0].direction, -1, "turned back after waiting");
+    }
+
+    #[test]
+    fn reset_is_seeded() {
+        let specs = vec![walker(false); 5];
+        let a = reset(&specs, &mut Rng::seed_from_u64(3));
+        let b = reset(&specs, &mut Rng::seed_from_u64(3));
+        assert_eq!(a, b);
+    }
+}
