@@ -1,0 +1,209 @@
+//! Environment contract: seeding, terminated vs truncated, collisions, auto-reset, and a
+//! golden rollout hash.
+
+use mdrlat_core::{Action, FRAME_STACK};
+use mdrlat_geom::Pose2;
+use mdrlat_sim::rollout::{CSV_HEADER, run_episode};
+use mdrlat_sim::{Collision, Env, RandomPolicy, SimConfig, StaticScene, VecEnv};
+use mdrlat_world::World;
+use std::sync::Arc;
+
+fn room(extra: &str) -> World {
+    let text = format!(
+        r#"version = 1
+name = "room"
+bounds = {{ min = [0.0, 0.0], max = [8.0, 8.0] }}
+obstacle = [
+  {{ shape = "box", center = [4.0, 0.05], size = [8.0, 0.1], z = [0.0, 2.5] }},
+  {{ shape = "box", center = [4.0, 7.95], size = [8.0, 0.1], z = [0.0, 2.5] }},
+  {{ shape = "box", center = [0.05, 4.0], size = [0.1, 8.0], z = [0.0, 2.5] }},
+  {{ shape = "box", center = [7.95, 4.0], size = [0.1, 8.0], z = [0.0, 2.5] }},
+  {{ shape = "box", center = [6.0, 6.0], size = [0.6, 0.6], z = [0.0, 0.2] }},
+]
+spawn = [ {{ min = [1.0, 1.0], max = [7.0, 7.0] }} ]
+{extra}
+"#
+    );
+    World::from_toml("room", &text).expect("room")
+}
+
+fn act(i: usize) -> Action {
+    Action::new(i).expect("action")
+}
+
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+}
+
+fn frames_bytes(env: &Env) -> Vec<u8> {
+    let o = env.observation();
+    let mut v = Vec::new();
+    for k in 0..FRAME_STACK {
+        v.extend(o.laser.frame(k).iter().flat_map(|x| x.to_le_bytes()));
+        v.extend(o.depth.frame(k).iter().flat_map(|x| x.to_le_bytes()));
+    }
+    v
+}
+
+#[test]
+fn time_limit_is_truncation_not_termination() {
+    let config = SimConfig { max_episode_steps: 20, ..SimConfig::default() };
+    let mut env = Env::from_world(room(""), config).expect("env");
+    env.reset_with(Some(1), Some(Pose2::new(4.0, 4.0, 0.0))).expect("reset");
+    for t in 1..=20 {
+        let s = env.step(act(9)).expect("step"); // turn in place: never collides
+        assert!(!s.terminated);
+        assert_eq!(s.truncated, t == 20, "step {t}");
+    }
+    assert!(env.step(act(9)).is_err(), "stepping an ended episode is an error");
+}
+
+#[test]
+fn driving_into_a_wall_terminates_with_the_collision_reward() {
+    let mut env = Env::from_world(room(""), SimConfig::default()).expect("env");
+    env.reset_with(Some(1), Some(Pose2::new(4.0, 1.5, -std::f32::consts::FRAC_PI_2))).expect("reset");
+    let mut last = None;
+    for _ in 0..40 {
+        let s = env.step(act(1)).expect("step");
+        if s.terminated {
+            last = Some((s.reward, s.info));
+            break;
+        }
+        assert!(s.reward > -10.0);
+    }
+    let (reward, info) = last.expect("hit the wall");
+    assert_eq!(reward, -10.0);
+    // Whichever fires first within the 0.2 s step: the laser's 0.2 m rule or the bumper.
+    assert!(matches!(info.collision, Some(Collision::LaserRange | Collision::Bumper { obstacle: 0 })));
+    assert!(info.d_min < 0.2, "{}", info.d_min);
+    assert!(info.pose.y > 0.1 + 0.1, "stopped at the wall, not through it: {:?}", info.pose);
+}
+
+#[test]
+fn a_low_box_hits_the_bumper_unseen_by_the_laser() {
+    let mut env = Env::from_world(room(""), SimConfig::default()).expect("env");
+    // Drive straight at the 0.2 m high box at (6, 6) from the west.
+    env.reset_with(Some(1), Some(Pose2::new(4.5, 6.0, 0.0))).expect("reset");
+    let mut hit = None;
+    for _ in 0..40 {
+        let s = env.step(act(1)).expect("step");
+        assert!(s.info.d_min > 1.0, "the laser never sees the low box");
+        if s.terminated {
+            hit = s.info.collision;
+            break;
+        }
+    }
+    assert_eq!(hit, Some(Collision::Bumper { obstacle: 4 }));
+}
+
+#[test]
+fn a_pedestrian_walking_into_the_robot_is_a_collision() {
+    let ped = r#"pedestrian = [ { waypoints = [[2.0, 4.0], [6.0, 4.0]], speed = 1.0 } ]"#;
+    let mut env = Env::from_world(room(ped), SimConfig::default()).expect("env");
+    env.reset_with(Some(3), Some(Pose2::new(4.0, 4.0, std::f32::consts::FRAC_PI_2))).expect("reset");
+    let mut hit = None;
+    for _ in 0..30 {
+        let s = env.step(act(8)).expect("step"); // turning in place
+        if s.terminated {
+            hit = s.info.collision;
+            break;
+        }
+    }
+    assert!(matches!(hit, Some(Collision::Pedestrian { index: 0 }) | Some(Collision::LaserRange)), "{hit:?}");
+}
+
+#[test]
+fn odometry_history_is_the_last_three_true_velocities() {
+    let mut env = Env::from_world(room(""), SimConfig::default()).expect("env");
+    env.reset_with(Some(1), Some(Pose2::new(4.0, 4.0, 0.0))).expect("reset");
+    let mut vs = Vec::new();
+    for _ in 0..4 {
+        let s = env.step(act(1)).expect("step");
+        vs.push(s.info.velocity);
+    }
+    assert_eq!(env.observation().odom, [vs[1], vs[2], vs[3]]);
+    // Acceleration-limited: 0.2 m/s per 0.2 s step towards 0.5.
+    assert!((vs[0].v - 0.2).abs() < 1e-5 && (vs[1].v - 0.4).abs() < 1e-5 && (vs[2].v - 0.5).abs() < 1e-5);
+}
+
+#[test]
+fn same_seed_same_bytes_and_different_seed_differs() {
+    let world = mdrlat_world::builtin::get("example").expect("builtin").expect("valid");
+    let run = |seed: u64| {
+        let mut env = Env::from_world(world.clone(), SimConfig::default()).expect("env");
+        let mut policy = RandomPolicy::new(seed);
+        let rows = run_episode(&mut env, &mut policy, seed, 120, |_, _| {}).expect("episode");
+        let csv: String = rows.iter().map(|r| r.to_csv() + "\n").collect();
+        (csv, frames_bytes(&env))
+    };
+    let (a, fa) = run(7);
+    let (b, fb) = run(7);
+    assert_eq!(a, b);
+    assert_eq!(fa, fb);
+    assert_ne!(run(8).0, a);
+}
+
+/// One golden rollout: a seeded random episode in the built-in `example` world. If this
+/// hash changes, the simulator's behaviour changed: check why before updating it.
+#[test]
+fn golden_rollout_hash() {
+    let world = mdrlat_world::builtin::get("example").expect("builtin").expect("valid");
+    let mut env = Env::from_world(world, SimConfig::default()).expect("env");
+    let mut policy = RandomPolicy::new(42);
+    let rows = run_episode(&mut env, &mut policy, 42, 200, |_, _| {}).expect("episode");
+    let mut csv = String::from(CSV_HEADER);
+    csv.push('\n');
+    for r in &rows {
+        csv.push_str(&r.to_csv());
+        csv.push('\n');
+    }
+    let h = (fnv1a(csv.as_bytes()), fnv1a(&frames_bytes(&env)));
+    assert_eq!(h, (GOLDEN.0, GOLDEN.1), "golden rollout changed ({} steps):\n{csv}", rows.len());
+}
+const GOLDEN: (u64, u64) = (3499768905222996766, 14074824012068988481);
+
+#[test]
+fn vec_env_matches_single_envs_and_keeps_final_observations() {
+    let config = SimConfig { max_episode_steps: 15, ..SimConfig::default() };
+    let world = Arc::new(room(""));
+    let scene = Arc::new(StaticScene::new(world.clone(), &config));
+    let mut venv = VecEnv::new(scene.clone(), config.clone(), 3, 2).expect("venv");
+    venv.reset(100).expect("reset");
+    let mut singles: Vec<Env> = (0..3)
+        .map(|i| {
+            let mut e = Env::new(scene.clone(), config.clone()).expect("env");
+            e.reset(Some(100 + i)).expect("reset");
+            e
+        })
+        .collect();
+    for t in 0..40 {
+        let actions: Vec<Action> = (0..3).map(|i| act((t * 3 + i) % 10)).collect();
+        let outs = venv.step(&actions).expect("step").to_vec();
+        for (i, env) in singles.iter_mut().enumerate() {
+            let s = env.step(actions[i]).expect("single step");
+            assert_eq!((s.reward, s.terminated, s.truncated), (outs[i].reward, outs[i].terminated, outs[i].truncated));
+            if s.terminated || s.truncated {
+                let fin = venv.final_observation(i).expect("final observation kept");
+                assert_eq!(fin, env.observation(), "true final observation");
+                env.reset(None).expect("reset");
+            } else {
+                assert!(venv.final_observation(i).is_none());
+            }
+            assert_eq!(venv.observation(i), env.observation());
+        }
+    }
+}
+
+#[test]
+fn resets_are_collision_free_and_inside_spawn_regions() {
+    let world = mdrlat_world::builtin::get("example").expect("builtin").expect("valid");
+    let mut env = Env::from_world(world.clone(), SimConfig::default()).expect("env");
+    for seed in 0..200 {
+        env.reset(Some(seed)).expect("reset");
+        let p = env.pose();
+        assert!(world.spawn.iter().any(|r| r.contains(p.position())));
+        assert!(world.is_free(p.position(), 0.177));
+        let d_min = env.observation().laser.latest().iter().copied().fold(f32::INFINITY, f32::min);
+        assert!(d_min > 0.2, "seed {seed}: spawned too close ({d_min})");
+    }
+}
