@@ -46,6 +46,18 @@ fn sensors_only(c: &mut Criterion) {
             env2.reset_with(None, Some(pose)).expect("reset");
         })
     });
+    let scene = env.scene().clone();
+    let mut rng = mdrlat_core::Rng::seed_from_u64(0);
+    let mut laser = mdrlat_sim::sensors::Laser::new(&env.config().laser);
+    let mut ranges = vec![0.0; mdrlat_core::LASER_BEAMS];
+    g.bench_function("laser_train", |b| {
+        b.iter(|| laser.scan(&scene, &[], &pose, &mut rng, &mut ranges))
+    });
+    let mut cam = mdrlat_sim::sensors::DepthCamera::new(&env.config().depth);
+    let mut image = vec![0.0; mdrlat_core::DEPTH_LEN];
+    g.bench_function("depth_train", |b| {
+        b.iter(|| cam.capture(&scene, &[], &pose, &mut rng, &mut image))
+    });
     g.finish();
 }
 

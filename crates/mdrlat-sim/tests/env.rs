@@ -32,7 +32,9 @@ fn act(i: usize) -> Action {
 }
 
 fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+    bytes
+        .iter()
+        .fold(0xcbf2_9ce4_8422_2325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
 }
 
 fn frames_bytes(env: &Env) -> Vec<u8> {
@@ -61,7 +63,8 @@ fn time_limit_is_truncation_not_termination() {
 #[test]
 fn driving_into_a_wall_terminates_with_the_collision_reward() {
     let mut env = Env::from_world(room(""), SimConfig::default()).expect("env");
-    env.reset_with(Some(1), Some(Pose2::new(4.0, 1.5, -std::f32::consts::FRAC_PI_2))).expect("reset");
+    env.reset_with(Some(1), Some(Pose2::new(4.0, 1.5, -std::f32::consts::FRAC_PI_2)))
+        .expect("reset");
     let mut last = None;
     for _ in 0..40 {
         let s = env.step(act(1)).expect("step");
@@ -74,7 +77,10 @@ fn driving_into_a_wall_terminates_with_the_collision_reward() {
     let (reward, info) = last.expect("hit the wall");
     assert_eq!(reward, -10.0);
     // Whichever fires first within the 0.2 s step: the laser's 0.2 m rule or the bumper.
-    assert!(matches!(info.collision, Some(Collision::LaserRange | Collision::Bumper { obstacle: 0 })));
+    assert!(matches!(
+        info.collision,
+        Some(Collision::LaserRange | Collision::Bumper { obstacle: 0 })
+    ));
     assert!(info.d_min < 0.2, "{}", info.d_min);
     assert!(info.pose.y > 0.1 + 0.1, "stopped at the wall, not through it: {:?}", info.pose);
 }
@@ -100,7 +106,8 @@ fn a_low_box_hits_the_bumper_unseen_by_the_laser() {
 fn a_pedestrian_walking_into_the_robot_is_a_collision() {
     let ped = r#"pedestrian = [ { waypoints = [[2.0, 4.0], [6.0, 4.0]], speed = 1.0 } ]"#;
     let mut env = Env::from_world(room(ped), SimConfig::default()).expect("env");
-    env.reset_with(Some(3), Some(Pose2::new(4.0, 4.0, std::f32::consts::FRAC_PI_2))).expect("reset");
+    env.reset_with(Some(3), Some(Pose2::new(4.0, 4.0, std::f32::consts::FRAC_PI_2)))
+        .expect("reset");
     let mut hit = None;
     for _ in 0..30 {
         let s = env.step(act(8)).expect("step"); // turning in place
@@ -109,7 +116,10 @@ fn a_pedestrian_walking_into_the_robot_is_a_collision() {
             break;
         }
     }
-    assert!(matches!(hit, Some(Collision::Pedestrian { index: 0 }) | Some(Collision::LaserRange)), "{hit:?}");
+    assert!(
+        matches!(hit, Some(Collision::Pedestrian { index: 0 }) | Some(Collision::LaserRange)),
+        "{hit:?}"
+    );
 }
 
 #[test]
@@ -123,7 +133,11 @@ fn odometry_history_is_the_last_three_true_velocities() {
     }
     assert_eq!(env.observation().odom, [vs[1], vs[2], vs[3]]);
     // Acceleration-limited: 0.2 m/s per 0.2 s step towards 0.5.
-    assert!((vs[0].v - 0.2).abs() < 1e-5 && (vs[1].v - 0.4).abs() < 1e-5 && (vs[2].v - 0.5).abs() < 1e-5);
+    assert!(
+        (vs[0].v - 0.2).abs() < 1e-5
+            && (vs[1].v - 0.4).abs() < 1e-5
+            && (vs[2].v - 0.5).abs() < 1e-5
+    );
 }
 
 #[test]
@@ -181,7 +195,10 @@ fn vec_env_matches_single_envs_and_keeps_final_observations() {
         let outs = venv.step(&actions).expect("step").to_vec();
         for (i, env) in singles.iter_mut().enumerate() {
             let s = env.step(actions[i]).expect("single step");
-            assert_eq!((s.reward, s.terminated, s.truncated), (outs[i].reward, outs[i].terminated, outs[i].truncated));
+            assert_eq!(
+                (s.reward, s.terminated, s.truncated),
+                (outs[i].reward, outs[i].terminated, outs[i].truncated)
+            );
             if s.terminated || s.truncated {
                 let fin = venv.final_observation(i).expect("final observation kept");
                 assert_eq!(fin, env.observation(), "true final observation");

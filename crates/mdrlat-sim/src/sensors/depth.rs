@@ -3,6 +3,8 @@
 use crate::config::DepthConfig;
 use crate::scene::StaticScene;
 use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, Rng};
+
+const _: () = assert!(DEPTH_COLS % 16 == 0, "the blocked transpose needs whole blocks");
 use mdrlat_geom::{Aabb, Fan, FanHits, GridScratch, Pose2, Prism};
 
 /// A simulated Kinect-like depth camera at the robot's centre.
@@ -28,6 +30,8 @@ pub struct DepthCamera {
     inv_y: [f32; DEPTH_ROWS],
     /// z-depth of the floor per row (infinite above the horizon).
     floor: [f32; DEPTH_ROWS],
+    /// Vertical focal length, pixels.
+    fy: f32,
     /// Nearest z per (fan index, row), column-major.
     zbuf: Vec<f32>,
     hits: FanHits,
@@ -64,6 +68,7 @@ impl DepthCamera {
             inv_k,
             inv_y,
             floor,
+            fy,
             zbuf: vec![0.0; DEPTH_COLS * DEPTH_ROWS],
             hits: FanHits::with_len(DEPTH_COLS),
             candidates: Vec::new(),
@@ -129,25 +134,47 @@ impl DepthCamera {
                 }
                 let z_in = t_in.max(0.0) * self.inv_k[j];
                 let z_out = t_out * self.inv_k[j];
+                let rows = self.rows_between(a, b, z_in, z_out);
                 let col = &mut self.zbuf[j * DEPTH_ROWS..(j + 1) * DEPTH_ROWS];
-                for (z, &iy) in col.iter_mut().zip(&self.inv_y) {
+                // Branch-free so it vectorises: one compare-and-blend per row.
+                for (z, &iy) in col[rows.clone()].iter_mut().zip(&self.inv_y[rows]) {
                     let (p, q) = (a * iy, b * iy);
-                    let start = z_in.max(p.min(q));
-                    let end = z_out.min(p.max(q));
-                    if start <= end && start < *z {
-                        *z = start;
-                    }
+                    let (lo, hi) = if p < q { (p, q) } else { (q, p) };
+                    let start = if z_in > lo { z_in } else { lo };
+                    let end = if z_out < hi { z_out } else { hi };
+                    *z = if start <= end && start < *z { start } else { *z };
                 }
             }
         }
     }
 
+    /// Rows that can see heights `h − b ..= h − a` (i.e. `[z_min, z_max]`) at some z-depth
+    /// in `[z_in, z_out]`: `y·z ∈ [a, b]` bounds `y`, and `y` gives the row. Padded by one;
+    /// the per-row test decides.
+    fn rows_between(&self, a: f32, b: f32, z_in: f32, z_out: f32) -> std::ops::Range<usize> {
+        let z_in = z_in.max(1e-6);
+        let y_lo = (a / z_in).min(a / z_out);
+        let y_hi = (b / z_in).max(b / z_out);
+        let half = DEPTH_ROWS as f32 / 2.0;
+        let to_row = |y: f32| y * self.fy + half - 0.5;
+        let lo = (to_row(y_lo).floor() - 1.0).clamp(0.0, DEPTH_ROWS as f32) as usize;
+        let hi = (to_row(y_hi).ceil() + 2.0).clamp(0.0, DEPTH_ROWS as f32) as usize;
+        lo..hi.max(lo)
+    }
+
     fn write_image(&self, rng: &mut Rng, out: &mut [f32]) {
         let (lo, hi) = (self.cfg.min_range_m, self.cfg.max_range_m);
-        for (j, col) in self.zbuf.chunks_exact(DEPTH_ROWS).enumerate() {
-            let c = DEPTH_COLS - 1 - j;
-            for (r, &z) in col.iter().enumerate() {
-                out[r * DEPTH_COLS + c] = if z >= lo && z <= hi { z } else { 0.0 };
+        // Blocked transpose (column-major z-buffer → row-major image): 16 sequential read
+        // streams and one contiguous write per row of the block.
+        const BLOCK: usize = 16;
+        for c0 in (0..DEPTH_COLS).step_by(BLOCK) {
+            for r in 0..DEPTH_ROWS {
+                let row = &mut out[r * DEPTH_COLS + c0..r * DEPTH_COLS + c0 + BLOCK];
+                for (k, o) in row.iter_mut().enumerate() {
+                    let j = DEPTH_COLS - 1 - (c0 + k);
+                    let z = self.zbuf[j * DEPTH_ROWS + r];
+                    *o = if z >= lo && z <= hi { z } else { 0.0 };
+                }
             }
         }
         let sigma = self.cfg.noise_std_at_1m;

@@ -90,10 +90,8 @@ impl Laser {
             prepared.cast(&self.fan, range.clone(), &mut self.hits);
             let (t_in, t_out) = (&self.hits.t_in[range.clone()], &self.hits.t_out[range.clone()]);
             for ((b, &a), &e) in self.best[range].iter_mut().zip(t_in).zip(t_out) {
-                let t = a.max(0.0);
-                if a <= e && e >= 0.0 && t < *b {
-                    *b = t;
-                }
+                let t = if a > 0.0 { a } else { 0.0 };
+                *b = if a <= e && e >= 0.0 && t < *b { t } else { *b };
             }
         }
     }
