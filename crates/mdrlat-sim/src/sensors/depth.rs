@@ -4,7 +4,7 @@ use crate::config::DepthConfig;
 use crate::scene::StaticScene;
 use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, Rng};
 
-const _: () = assert!(DEPTH_COLS % 16 == 0, "the blocked transpose needs whole blocks");
+const _: () = assert!(DEPTH_COLS.is_multiple_of(16), "the blocked transpose needs whole blocks");
 use mdrlat_geom::{Aabb, Fan, FanHits, GridScratch, Pose2, Prism};
 
 /// A simulated Kinect-like depth camera at the robot's centre.
