@@ -7,6 +7,7 @@
 //! `reset(seed)` is the only way to seed, and `step` reports `terminated` (collision) and
 //! `truncated` (time limit) separately.
 
+pub mod bench;
 pub mod config;
 pub mod env;
 pub mod pedestrians;

@@ -1,6 +1,7 @@
 //! Scripted policies: baselines and demo drivers that need no network.
 
 use crate::env::Observation;
+use crate::sensors::DepthGeometry;
 use mdrlat_core::{Action, Rng, TABLE_1};
 
 /// Anything that picks an action from an observation.
@@ -39,26 +40,38 @@ impl Policy for ConstantPolicy {
     }
 }
 
-/// A reactive laser-only wanderer: drives towards the direction with the most clearance,
-/// slowing down and turning in place when obstacles are close. Blind to what only the depth
-/// camera sees — a useful baseline, and the demo's driver before any training.
+/// A reactive wanderer: drives towards the direction with the most clearance, slowing
+/// down and turning in place when obstacles are close. With only the laser it is blind to
+/// what lies under or over the laser plane; given the depth camera's geometry it also reads
+/// obstacles from the depth image (heights between 3 cm and the body height). A scripted
+/// baseline, and the demo's driver before any training.
 #[derive(Debug, Clone)]
 pub struct WanderPolicy {
-    /// Beam angles of the laser, radians (robot frame).
+    /// Ray angles: laser beams, then depth columns when fused (robot frame, radians).
     angles: Vec<f32>,
+    depth: Option<(DepthGeometry, f32)>,
+    ranges: Vec<f32>,
 }
 
 impl WanderPolicy {
-    /// A wanderer for a laser with these beam angles.
+    /// A laser-only wanderer for a laser with these beam angles.
     pub fn new(beam_angles: &[f32]) -> Self {
-        Self { angles: beam_angles.to_vec() }
+        Self { angles: beam_angles.to_vec(), depth: None, ranges: Vec::new() }
+    }
+
+    /// A wanderer that also avoids obstacles seen only by the depth camera, up to
+    /// `body_height_m`.
+    pub fn with_depth(beam_angles: &[f32], depth: DepthGeometry, body_height_m: f32) -> Self {
+        let mut angles = beam_angles.to_vec();
+        angles.extend_from_slice(&depth.column_angles);
+        Self { angles, depth: Some((depth, body_height_m)), ranges: Vec::new() }
     }
 
     /// Smallest range within `half_width` radians of direction `dir`.
-    fn clearance(&self, ranges: &[f32], dir: f32, half_width: f32) -> f32 {
+    fn clearance(&self, dir: f32, half_width: f32) -> f32 {
         self.angles
             .iter()
-            .zip(ranges)
+            .zip(&self.ranges)
             .filter(|(a, _)| (**a - dir).abs() <= half_width)
             .map(|(_, r)| *r)
             .fold(f32::INFINITY, f32::min)
@@ -67,13 +80,19 @@ impl WanderPolicy {
 
 impl Policy for WanderPolicy {
     fn act(&mut self, obs: &Observation) -> Action {
-        let ranges = obs.laser.latest();
+        self.ranges.clear();
+        self.ranges.extend_from_slice(obs.laser.latest());
+        if let Some((geometry, body)) = &self.depth {
+            let n = geometry.column_angles.len();
+            let start = self.ranges.len();
+            self.ranges.resize(start + n, f32::INFINITY);
+            geometry.obstacle_ranges(obs.depth.latest(), 0.03, *body, &mut self.ranges[start..]);
+        }
         let mut best = (f32::NEG_INFINITY, 8usize);
         for a in Action::all() {
             let c = TABLE_1[a.index()];
             // Where this command heads over the next second.
-            let dir = c.w * 1.0;
-            let clear = self.clearance(ranges, dir, 0.35);
+            let clear = self.clearance(c.w, 0.35);
             let need = 0.45 + 1.2 * c.v;
             let score = if clear > need {
                 c.v * 4.0 + clear.min(3.0) * 0.5 - c.w.abs() * 0.3

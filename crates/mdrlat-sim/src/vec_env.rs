@@ -3,6 +3,7 @@
 //! When an episode ends, its environment is reset at once (continuing its own random
 //! stream) and the true final observation is kept in [`VecEnv::final_observation`] for
 //! the replay buffer, as CleanRL and SB3 do. Keeping it costs a pointer swap, not a copy.
+//! The calling thread steps a share of the environments itself (see [`VecEnv::step`]).
 
 use crate::config::SimConfig;
 use crate::env::{Env, Observation, SimError, StepInfo};
@@ -30,7 +31,34 @@ pub struct VecEnv {
     envs: Vec<Env>,
     finals: Vec<Observation>,
     outcomes: Vec<VecStep>,
-    pool: rayon::ThreadPool,
+    /// Threads stepping environments, the caller's included.
+    threads: usize,
+    /// The `threads − 1` helpers; `None` when stepping on the caller alone.
+    pool: Option<rayon::ThreadPool>,
+}
+
+/// Steps a contiguous chunk of environments on the current thread.
+fn step_chunk(
+    envs: &mut [Env],
+    finals: &mut [Observation],
+    actions: &[Action],
+    out: &mut [Option<Result<VecStep, SimError>>],
+) {
+    for (((env, fin), &a), o) in envs.iter_mut().zip(finals).zip(actions).zip(out) {
+        let stepped = env.step(a).map(|s| VecStep {
+            reward: s.reward,
+            terminated: s.terminated,
+            truncated: s.truncated,
+            info: s.info,
+        });
+        *o = Some(stepped.and_then(|step| {
+            if step.terminated || step.truncated {
+                env.swap_observation(fin);
+                env.reset(None)?;
+            }
+            Ok(step)
+        }));
+    }
 }
 
 impl VecEnv {
@@ -50,14 +78,23 @@ impl VecEnv {
         let envs = (0..n)
             .map(|_| Env::new(scene.clone(), config.clone()))
             .collect::<Result<Vec<_>, _>>()?;
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .expect("cannot create the VecEnv thread pool");
+        let threads = if threads == 0 {
+            std::thread::available_parallelism().map_or(1, |t| t.get())
+        } else {
+            threads
+        };
+        let pool = (threads > 1).then(|| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads - 1)
+                .thread_name(|i| format!("mdrlat-venv-{i}"))
+                .build()
+                .expect("cannot create the VecEnv thread pool")
+        });
         Ok(Self {
             finals: (0..n).map(|_| Observation::zeros()).collect(),
             outcomes: Vec::with_capacity(n),
             envs,
+            threads,
             pool,
         })
     }
@@ -74,7 +111,7 @@ impl VecEnv {
 
     /// Threads stepping the environments.
     pub fn threads(&self) -> usize {
-        self.pool.current_num_threads()
+        self.threads
     }
 
     /// Resets every environment; environment `i` is seeded with `seed + i`.
@@ -83,43 +120,66 @@ impl VecEnv {
     /// An environment found no free start pose.
     pub fn reset(&mut self, seed: u64) -> Result<(), SimError> {
         let envs = &mut self.envs;
-        self.pool.install(|| {
+        let mut reset_all = || {
             envs.par_iter_mut()
                 .enumerate()
                 .try_for_each(|(i, env)| env.reset(Some(seed.wrapping_add(i as u64))).map(|_| ()))
-        })
+        };
+        match &self.pool {
+            Some(pool) => pool.install(reset_all),
+            None => reset_all(),
+        }
     }
 
     /// Steps every environment with its action; finished episodes are reset at once.
     ///
+    /// The environments are split into one contiguous chunk per thread; the calling thread
+    /// steps the first chunk itself while the pool's threads step the others, so a step
+    /// costs no hand-off to a sleeping thread and one thread costs nothing at all.
+    ///
     /// # Errors
     /// Wrong number of actions, or a reset found no free pose.
     pub fn step(&mut self, actions: &[Action]) -> Result<&[VecStep], SimError> {
-        if actions.len() != self.envs.len() {
-            return Err(SimError::ActionCount { expected: self.envs.len(), got: actions.len() });
+        let n = self.envs.len();
+        if actions.len() != n {
+            return Err(SimError::ActionCount { expected: n, got: actions.len() });
         }
-        let (envs, finals) = (&mut self.envs, &mut self.finals);
-        let results: Result<Vec<VecStep>, SimError> = self.pool.install(|| {
-            envs.par_iter_mut()
-                .zip(finals.par_iter_mut())
-                .zip(actions.par_iter())
-                .map(|((env, fin), &a)| {
-                    let s = env.step(a)?;
-                    let out = VecStep {
-                        reward: s.reward,
-                        terminated: s.terminated,
-                        truncated: s.truncated,
-                        info: s.info,
-                    };
-                    if out.terminated || out.truncated {
-                        env.swap_observation(fin);
-                        env.reset(None)?;
-                    }
-                    Ok(out)
-                })
-                .collect()
-        });
-        self.outcomes = results?;
+        let mut results: Vec<Option<Result<VecStep, SimError>>> = (0..n).map(|_| None).collect();
+        let chunks = self.threads.min(n).max(1);
+        let bounds: Vec<usize> = (0..=chunks).map(|k| k * n / chunks).collect();
+        let mut envs: &mut [Env] = &mut self.envs;
+        let mut finals: &mut [Observation] = &mut self.finals;
+        let mut outs: &mut [Option<Result<VecStep, SimError>>] = &mut results;
+        let mut parts = Vec::with_capacity(chunks);
+        for k in 0..chunks {
+            let len = bounds[k + 1] - bounds[k];
+            let (e, e_rest) = std::mem::take(&mut envs).split_at_mut(len);
+            let (f, f_rest) = std::mem::take(&mut finals).split_at_mut(len);
+            let (o, o_rest) = std::mem::take(&mut outs).split_at_mut(len);
+            (envs, finals, outs) = (e_rest, f_rest, o_rest);
+            parts.push((e, f, &actions[bounds[k]..bounds[k + 1]], o));
+        }
+        let mut parts = parts.into_iter();
+        let first = parts.next();
+        match &self.pool {
+            Some(pool) => pool.in_place_scope(|scope| {
+                for (e, f, a, o) in parts {
+                    scope.spawn(move |_| step_chunk(e, f, a, o));
+                }
+                if let Some((e, f, a, o)) = first {
+                    step_chunk(e, f, a, o);
+                }
+            }),
+            None => {
+                if let Some((e, f, a, o)) = first {
+                    step_chunk(e, f, a, o);
+                }
+            }
+        }
+        self.outcomes.clear();
+        for r in results {
+            self.outcomes.push(r.unwrap_or(Err(SimError::NeedsReset))?);
+        }
         Ok(&self.outcomes)
     }
 

@@ -81,9 +81,15 @@ impl DepthCamera {
         &self.cfg
     }
 
-    /// Ground-plane angle of each column's ray in the robot frame, column 0 first.
-    pub fn column_angles(&self) -> Vec<f32> {
-        self.fan.angles().iter().rev().copied().collect()
+    /// The camera's projection, for turning images back into geometry.
+    pub fn geometry(&self) -> DepthGeometry {
+        let n = DEPTH_COLS;
+        DepthGeometry {
+            column_angles: (0..n).map(|c| self.fan.angles()[n - 1 - c]).collect(),
+            column_k: (0..n).map(|c| 1.0 / self.inv_k[n - 1 - c]).collect(),
+            row_y: self.inv_y.iter().map(|iy| 1.0 / iy).collect(),
+            height_m: self.cfg.height_m,
+        }
     }
 
     /// Captures a frame from `pose` into `out` (128 x 160, row-major, metres).
@@ -188,6 +194,39 @@ impl DepthCamera {
                 if sigma > 0.0 {
                     let noisy = *z + sigma * *z * *z * rng.normal();
                     *z = if noisy >= lo && noisy <= hi { noisy } else { 0.0 };
+                }
+            }
+        }
+    }
+}
+
+/// The projection of a depth camera: enough to turn a depth image back into points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthGeometry {
+    /// Ground-plane angle of each column's ray in the robot frame, column 0 (left) first.
+    pub column_angles: Vec<f32>,
+    /// Ground distance per metre of z-depth, per column (`sqrt(1 + x_c²)`).
+    pub column_k: Vec<f32>,
+    /// Normalised image y (down positive) of each row's centre.
+    pub row_y: Vec<f32>,
+    /// Height of the optical centre, metres.
+    pub height_m: f32,
+}
+
+impl DepthGeometry {
+    /// A virtual laser scan from a depth image (as ROS's depthimage_to_laserscan, but
+    /// height-aware): per column, the ground distance of the nearest pixel whose height lies
+    /// in `[z_lo, z_hi]` metres — obstacles the body can hit, floor excluded. Columns with no
+    /// such pixel read `f32::INFINITY`.
+    pub fn obstacle_ranges(&self, depth_m: &[f32], z_lo: f32, z_hi: f32, out: &mut [f32]) {
+        let cols = self.column_angles.len();
+        out.fill(f32::INFINITY);
+        for (r, row) in depth_m.chunks_exact(cols).enumerate() {
+            let y = self.row_y[r];
+            for (c, &z) in row.iter().enumerate() {
+                let h = self.height_m - y * z;
+                if z > 0.0 && h >= z_lo && h <= z_hi {
+                    out[c] = out[c].min(z * self.column_k[c]);
                 }
             }
         }

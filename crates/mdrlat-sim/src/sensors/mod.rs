@@ -8,5 +8,5 @@
 mod depth;
 mod laser;
 
-pub use depth::DepthCamera;
+pub use depth::{DepthCamera, DepthGeometry};
 pub use laser::Laser;

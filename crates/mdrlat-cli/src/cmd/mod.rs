@@ -1,0 +1,108 @@
+//! One module per subcommand, plus the glue they share.
+
+pub mod bench;
+pub mod demo;
+pub mod observe;
+pub mod render;
+pub mod rollout;
+pub mod worlds;
+
+use anyhow::{Context, Result, bail};
+use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS};
+use mdrlat_geom::{Pose2, Vec2};
+use mdrlat_render::{Image, LaserRays, RobotMark, Scene, depth_view, side_by_side, top_view};
+use mdrlat_sim::{Env, SimConfig};
+use mdrlat_world::World;
+use std::path::Path;
+
+/// Loads a world by built-in name, `.toml` path or map_server `.yaml` path.
+pub fn load_world(spec: &str) -> Result<World> {
+    Ok(mdrlat_world::load(spec)?)
+}
+
+/// An environment over `world` with `config`.
+pub fn make_env(world: World, config: &SimConfig) -> Result<Env> {
+    Ok(Env::from_world(world, config.clone())?)
+}
+
+/// Parses `X,Y,YAW_DEG` (metres, metres, degrees).
+pub fn parse_pose(s: &str) -> Result<Pose2> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        bail!("--pose '{s}': expected X,Y,YAW_DEG (three comma-separated numbers)");
+    }
+    let mut v = [0f32; 3];
+    for (slot, p) in v.iter_mut().zip(&parts) {
+        *slot = p
+            .parse::<f32>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .with_context(|| format!("--pose '{s}': '{p}' is not a finite number"))?;
+    }
+    Ok(Pose2::new(v[0], v[1], v[2].to_radians()))
+}
+
+/// A scale that makes the longer side of the world about `target_px` pixels.
+pub fn px_per_m(world: &World, target_px: f32) -> f32 {
+    let s = world.bounds.size();
+    (target_px / s.x.max(s.y)).clamp(4.0, 120.0)
+}
+
+/// The environment's state from above (robot, rays, pedestrians, trail) with the current
+/// depth image beside it.
+pub fn snapshot(env: &Env, trail: &[Vec2], caption: &str, collided: bool, scale: f32) -> Image {
+    let peds = env.pedestrian_discs();
+    let obs = env.observation();
+    let laser = env.laser();
+    let scene = Scene {
+        robot: Some(RobotMark { pose: env.pose(), radius: env.config().robot.radius_m, collided }),
+        pedestrians: &peds,
+        laser: Some(LaserRays {
+            origin: env.pose(),
+            angles: laser.angles(),
+            ranges: obs.laser.latest(),
+            max_range: laser.config().max_range_m,
+        }),
+        trail,
+        caption: Some(caption),
+        ..Scene::new(env.world())
+    };
+    let top = top_view(&scene, scale);
+    let depth = depth_view(
+        obs.depth.latest(),
+        DEPTH_ROWS,
+        DEPTH_COLS,
+        env.depth_camera().config().max_range_m,
+        2,
+    );
+    side_by_side(&[&top, &depth], 12)
+}
+
+/// Creates `dir` (and parents) with a clear error.
+pub fn ensure_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create directory {}", dir.display()))
+}
+
+/// Creates the parent directory of `file`, if any.
+pub fn ensure_parent(file: &Path) -> Result<()> {
+    match file.parent() {
+        Some(p) if !p.as_os_str().is_empty() => ensure_dir(p),
+        _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn poses_parse_or_explain() {
+        let p = parse_pose("1.5, 2, 90").expect("pose");
+        assert_eq!((p.x, p.y), (1.5, 2.0));
+        assert!((p.yaw - std::f32::consts::FRAC_PI_2).abs() < 1e-6);
+        assert!(parse_pose("1,2").is_err());
+        assert!(parse_pose("1,2,nan").expect_err("nan").to_string().contains("nan"));
+        assert!(parse_pose("a,2,3").is_err());
+    }
+}

@@ -1,0 +1,116 @@
+//! `mdrlat`: the command line of the mdrlat toolkit. Argument parsing and glue only; the
+//! work happens in the library crates.
+
+/// `println!` that ends the program quietly when stdout is closed (`mdrlat … | head`)
+/// instead of panicking.
+macro_rules! out {
+    ($($t:tt)*) => {
+        $crate::emit(format_args!($($t)*))
+    };
+}
+
+mod cmd;
+mod config;
+mod progress;
+
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Multimodal deep-RL obstacle avoidance (MDRLAT, Song et al. 2021): a fast 2.5D simulator
+/// with a 2D laser and a depth camera.
+#[derive(Debug, Parser)]
+#[command(name = "mdrlat", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Runs a seeded episode in a built-in world, writes a GIF, pictures and the trajectory,
+    /// then benchmarks the simulator. The first thing to run.
+    Demo(cmd::demo::Args),
+    /// Lists the built-in worlds.
+    Worlds,
+    /// Works with world files.
+    #[command(subcommand)]
+    World(WorldCommand),
+    /// Writes what both sensors see at a pose: laser.npy, depth.npy (metres) and view.png.
+    Observe(cmd::observe::Args),
+    /// Draws a world from above with the robot, its laser rays and its depth image beside.
+    Render(cmd::render::Args),
+    /// Runs one episode with a scripted policy and writes its trajectory as CSV (and a GIF).
+    Rollout(cmd::rollout::Args),
+    /// Measures performance.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+    /// Prints or checks configuration files.
+    #[command(subcommand)]
+    Config(ConfigCommand),
+}
+
+#[derive(Debug, Subcommand)]
+enum WorldCommand {
+    /// Validates a world file (.toml) or a ROS map_server map (.yaml); exits non-zero with
+    /// the file, field and problem if it is invalid.
+    Check {
+        /// Path to the world file or map YAML.
+        file: PathBuf,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum BenchCommand {
+    /// Environment steps per second with full sensors: one env, and a VecEnv on all cores.
+    Sim(cmd::bench::SimArgs),
+}
+
+#[derive(Debug, Subcommand)]
+enum ConfigCommand {
+    /// Prints the default configuration, every key commented.
+    Default,
+    /// Checks a configuration file and prints it resolved (defaults filled in).
+    Check {
+        /// Path to the TOML file.
+        file: PathBuf,
+    },
+}
+
+/// Writes one line to stdout; a closed pipe ends the program with success.
+pub fn emit(args: std::fmt::Arguments) {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    if let Err(e) = o.write_fmt(args).and_then(|()| o.write_all(b"\n")) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("error: writing to stdout: {e}");
+        std::process::exit(1);
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Demo(a) => cmd::demo::run(&a),
+        Command::Worlds => cmd::worlds::list(),
+        Command::World(WorldCommand::Check { file }) => cmd::worlds::check(&file),
+        Command::Observe(a) => cmd::observe::run(&a),
+        Command::Render(a) => cmd::render::run(&a),
+        Command::Rollout(a) => cmd::rollout::run(&a),
+        Command::Bench(BenchCommand::Sim(a)) => cmd::bench::sim(&a),
+        Command::Config(ConfigCommand::Default) => {
+            out!("{}", config::DEFAULT_TOML.trim_end());
+            Ok(())
+        }
+        Command::Config(ConfigCommand::Check { file }) => config::check(&file),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
