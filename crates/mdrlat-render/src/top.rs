@@ -111,6 +111,9 @@ impl MapFrame {
     }
 }
 
+/// Spawn regions beyond this many are tinted, not outlined.
+const MAX_OUTLINED_SPAWNS: usize = 16;
+
 /// Largest map side, pixels: a larger `px_per_m` is reduced to fit.
 const MAX_MAP_PX: f32 = 8000.0;
 
@@ -482,9 +485,19 @@ fn draw_world(pm: &mut Pixmap, lay: &Layout, world: &World, text: &mut Texts) {
         dash: StrokeDash::new(vec![6.0 * ts, 4.0 * ts], 0.0),
         ..Stroke::default()
     };
-    for r in &world.spawn {
-        if let Some(p) = aabb_path(f, r) {
-            stroke_with(pm, &p, style::SPAWN, 150, &dashed);
+    // Imported maps have hundreds of spawn rectangles: outlines would hide the map, so
+    // many regions are drawn as one faint tint instead.
+    if world.spawn.len() > MAX_OUTLINED_SPAWNS {
+        for r in &world.spawn {
+            if let Some(p) = aabb_path(f, r) {
+                fill(pm, &p, style::SPAWN, 40);
+            }
+        }
+    } else {
+        for r in &world.spawn {
+            if let Some(p) = aabb_path(f, r) {
+                stroke_with(pm, &p, style::SPAWN, 150, &dashed);
+            }
         }
     }
     for r in &world.goals {

@@ -224,3 +224,43 @@ fn resets_are_collision_free_and_inside_spawn_regions() {
         assert!(d_min > 0.2, "seed {seed}: spawned too close ({d_min})");
     }
 }
+
+#[test]
+fn noise_is_seeded_and_never_shifts_spawn_poses() {
+    let world = mdrlat_world::builtin::get("train").expect("builtin").expect("valid");
+    let mut noisy = SimConfig::default();
+    noisy.laser.noise_std_m = 0.01;
+    noisy.depth.noise_std_at_1m = 0.01;
+    noisy.depth.dropout_prob = 0.05;
+    let mut clean_env = Env::from_world(world.clone(), SimConfig::default()).expect("env");
+    let mut a = Env::from_world(world.clone(), noisy.clone()).expect("env");
+    let mut b = Env::from_world(world, noisy).expect("env");
+    clean_env.reset(Some(11)).expect("reset");
+    a.reset(Some(11)).expect("reset");
+    b.reset(Some(11)).expect("reset");
+    assert_eq!(a.pose(), clean_env.pose(), "noise has its own random stream");
+    assert_eq!(a.observation(), b.observation(), "same seed, same noise");
+    assert_ne!(a.observation().laser.latest(), clean_env.observation().laser.latest());
+    let dropped = a.observation().depth.latest().iter().filter(|&&z| z == 0.0).count();
+    let clean_zero = clean_env.observation().depth.latest().iter().filter(|&&z| z == 0.0).count();
+    assert!(dropped > clean_zero + 500, "dropout zeroes pixels: {dropped} vs {clean_zero}");
+    for &r in a.observation().laser.latest() {
+        assert!((0.0..=5.6).contains(&r));
+    }
+}
+
+#[test]
+fn observations_normalise_through_the_shared_core_function() {
+    let world = mdrlat_world::builtin::get("train").expect("builtin").expect("valid");
+    let mut env = Env::from_world(world, SimConfig::default()).expect("env");
+    env.reset(Some(2)).expect("reset");
+    env.step(act(1)).expect("step");
+    let obs = env.observation();
+    let mut laser = vec![0.0; 4 * 512];
+    obs.laser.write_stacked(&mut laser, mdrlat_core::normalize_laser);
+    let mut depth = vec![0.0; 4 * 128 * 160];
+    obs.depth.write_stacked(&mut depth, mdrlat_core::normalize_depth);
+    assert!(laser.iter().all(|x| (0.0..=1.0).contains(x)));
+    assert!(depth.iter().all(|x| (0.0..=2.0).contains(x)));
+    assert_eq!(laser[3 * 512 + 7], obs.laser.latest()[7] / 5.6);
+}

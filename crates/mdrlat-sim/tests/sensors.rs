@@ -176,3 +176,33 @@ fn readings_closer_than_the_minimum_depth_are_zero() {
     assert!((laser[255] - 0.3).abs() < 1e-4 || (laser[256] - 0.3).abs() < 1e-4);
     assert!(depth.iter().all(|&z| z == 0.0));
 }
+
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn env_for(name: &str) -> Env {
+        let world = mdrlat_world::builtin::get(name).expect("builtin").expect("valid");
+        Env::from_world(world, SimConfig::default()).expect("env")
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(96))]
+        /// Anywhere in any built-in world, facing anywhere: laser ranges lie in [0, max],
+        /// depth is 0 or within [min, max], and nothing is NaN.
+        #[test]
+        fn readings_stay_in_range(world in prop::sample::select(vec!["train", "office", "furnished", "crowd", "nav-test"]),
+                                  fx in 0.0f32..1.0, fy in 0.0f32..1.0, yaw in -3.2f32..3.2, seed in 0u64..1000) {
+            let mut env = env_for(world);
+            let b = env.world().bounds;
+            let pose = Pose2::new(b.min.x + fx * b.size().x, b.min.y + fy * b.size().y, yaw);
+            let obs = env.reset_with(Some(seed), Some(pose)).expect("reset");
+            for &r in obs.laser.latest() {
+                prop_assert!(!r.is_nan() && (0.0..=5.6).contains(&r), "laser {r}");
+            }
+            for &z in obs.depth.latest() {
+                prop_assert!(!z.is_nan() && (z == 0.0 || (0.4..=10.0).contains(&z)), "depth {z}");
+            }
+        }
+    }
+}

@@ -41,6 +41,9 @@ pub fn run(a: &Args) -> Result<()> {
     let world = load_world(&a.world)?;
     let mut env = make_env(world, &config.sim)?;
     env.reset_with(Some(a.seed), Some(pose))?;
+    if !env.world().is_free(pose.position(), config.sim.robot.radius_m) {
+        eprintln!("note: the robot at this pose overlaps an obstacle (it would be in collision)");
+    }
     ensure_dir(&a.out)?;
     let obs = env.observation();
     write_npy(&a.out.join("laser.npy"), &[LASER_BEAMS], obs.laser.latest())?;

@@ -1,0 +1,203 @@
+//! The `mdrlat` binary end to end: outputs people and scripts rely on, and bad input giving
+//! one clear line and a non-zero exit (never a panic).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn mdrlat(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mdrlat")).args(args).output().expect("run mdrlat")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("mdrlat-cli-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn assert_clean_failure(o: &Output, needles: &[&str]) {
+    let e = stderr(o);
+    assert!(!o.status.success(), "expected failure, got success; stderr: {e}");
+    assert!(!e.contains("panicked"), "panic instead of an error: {e}");
+    assert!(e.starts_with("error: "), "one clear error line: {e}");
+    for n in needles {
+        assert!(e.contains(n), "stderr lacks '{n}': {e}");
+    }
+}
+
+fn npy_f32(path: &Path) -> (String, Vec<f32>) {
+    let b = std::fs::read(path).expect("npy");
+    assert_eq!(&b[..6], b"\x93NUMPY");
+    let hlen = u16::from_le_bytes([b[8], b[9]]) as usize;
+    let header = String::from_utf8(b[10..10 + hlen].to_vec()).expect("header");
+    let data = b[10 + hlen..]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    (header, data)
+}
+
+const GOOD: &str = r#"version = 1
+name = "cli"
+bounds = { min = [0.0, 0.0], max = [4.0, 4.0] }
+obstacle = [ { shape = "box", center = [2.0, 3.95], size = [4.0, 0.1], z = [0.0, 2.0] } ]
+spawn = [ { min = [0.5, 0.5], max = [3.5, 3.0] } ]
+"#;
+
+#[test]
+fn world_check_accepts_good_files_and_names_the_problem_in_bad_ones() {
+    let d = tmp("check");
+    let good = d.join("good.toml");
+    std::fs::write(&good, GOOD).expect("write");
+    let o = mdrlat(&["world", "check", good.to_str().expect("utf8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    let cases: [(&str, String, &[&str]); 5] = [
+        (
+            "negative.toml",
+            GOOD.replace("[4.0, 0.1]", "[4.0, -0.1]"),
+            &["negative.toml", "obstacle[0].size", "-0.1"],
+        ),
+        ("shape.toml", GOOD.replace("\"box\"", "\"sphere\""), &["shape.toml", "sphere"]),
+        (
+            "nan.toml",
+            GOOD.replace("z = [0.0, 2.0]", "z = [0.0, nan]"),
+            &["nan.toml", "obstacle[0].z"],
+        ),
+        ("missing.toml", GOOD.replace("name = \"cli\"\n", ""), &["missing.toml", "name"]),
+        (
+            "key.toml",
+            GOOD.replace("version = 1", "version = 1\ncolour = 3"),
+            &["key.toml", "colour"],
+        ),
+    ];
+    for (name, text, needles) in cases {
+        let p = d.join(name);
+        std::fs::write(&p, text).expect("write");
+        assert_clean_failure(&mdrlat(&["world", "check", p.to_str().expect("utf8")]), needles);
+    }
+    assert_clean_failure(
+        &mdrlat(&["world", "check", "/no/such/world.toml"]),
+        &["/no/such/world.toml"],
+    );
+    // A map YAML whose image is not an image.
+    std::fs::write(d.join("notmap.pgm"), b"hello, I am text").expect("write");
+    std::fs::write(
+        d.join("notmap.yaml"),
+        "image: notmap.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n",
+    )
+    .expect("write");
+    let yaml = d.join("notmap.yaml");
+    assert_clean_failure(
+        &mdrlat(&["world", "check", yaml.to_str().expect("utf8")]),
+        &["notmap.pgm"],
+    );
+    assert_clean_failure(&mdrlat(&["render", "--world", "atlantis"]), &["atlantis", "train"]);
+}
+
+#[test]
+fn observe_writes_numpy_frames_in_metres() {
+    let d = tmp("observe");
+    let o = mdrlat(&[
+        "observe",
+        "--world",
+        "train",
+        "--pose",
+        "3,2,90",
+        "--out",
+        d.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (h, laser) = npy_f32(&d.join("laser.npy"));
+    assert!(h.contains("'shape': (512,)") && h.contains("<f4"), "{h}");
+    assert_eq!(laser.len(), 512);
+    assert!(laser.iter().all(|r| (0.0..=5.6).contains(r)));
+    let (h, depth) = npy_f32(&d.join("depth.npy"));
+    assert!(h.contains("'shape': (128, 160)"), "{h}");
+    assert!(depth.iter().all(|&z| z == 0.0 || (0.4..=10.0).contains(&z)));
+    // The bottom row sees the floor at 0.30 m / y.
+    let y = 63.5 / (64.0 / 22.5f32.to_radians().tan());
+    assert!((depth[127 * 160 + 80] - 0.30 / y).abs() < 1e-3, "{}", depth[127 * 160 + 80]);
+    assert!(std::fs::metadata(d.join("view.png")).expect("png").len() > 1000);
+    assert_clean_failure(&mdrlat(&["observe", "--pose", "1,2"]), &["--pose", "X,Y,YAW_DEG"]);
+}
+
+#[test]
+fn rollouts_are_byte_identical_for_a_seed() {
+    let d = tmp("rollout");
+    let run = |seed: &str, name: &str| {
+        let out = d.join(name);
+        let o = mdrlat(&[
+            "rollout",
+            "--world",
+            "crowd",
+            "--seed",
+            seed,
+            "--steps",
+            "80",
+            "--policy",
+            "random",
+            "--out",
+            out.to_str().expect("utf8"),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        std::fs::read(out).expect("csv")
+    };
+    let a = run("5", "a.csv");
+    assert_eq!(a, run("5", "b.csv"));
+    assert_ne!(a, run("6", "c.csv"));
+    let text = String::from_utf8(a).expect("utf8");
+    assert!(text.starts_with("step,x,y,yaw,v,w,action,reward,terminated,truncated,d_min\n"));
+    assert!(text.lines().count() >= 2);
+}
+
+#[test]
+fn bench_prints_json_lines() {
+    let o = mdrlat(&[
+        "bench",
+        "sim",
+        "--json",
+        "--seconds",
+        "0.05",
+        "--worlds",
+        "example",
+        "--envs",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8(o.stdout).expect("utf8");
+    let lines: Vec<serde_json::Value> =
+        out.lines().map(|l| serde_json::from_str(l).expect("json line")).collect();
+    assert_eq!(lines.len(), 2);
+    for l in &lines {
+        assert_eq!(l["bench"], "sim");
+        assert_eq!(l["world"], "example");
+        assert!(l["steps_per_s"].as_f64().expect("number") > 0.0);
+        assert!(l["envs"].as_u64().is_some() && l["threads"].as_u64().is_some());
+    }
+}
+
+#[test]
+fn config_default_round_trips_and_bad_configs_are_rejected() {
+    let d = tmp("config");
+    let o = mdrlat(&["config", "default"]);
+    assert!(o.status.success());
+    let p = d.join("default.toml");
+    std::fs::write(&p, &o.stdout).expect("write");
+    assert!(mdrlat(&["config", "check", p.to_str().expect("utf8")]).status.success());
+    let bad = d.join("bad.toml");
+    std::fs::write(&bad, "[sim.laser]\nmax_range_m = -2.0\n").expect("write");
+    assert_clean_failure(
+        &mdrlat(&["config", "check", bad.to_str().expect("utf8")]),
+        &["bad.toml", "laser.max_range_m"],
+    );
+    std::fs::write(&bad, "[sim]\nspeed = 3\n").expect("write");
+    assert_clean_failure(
+        &mdrlat(&["config", "check", bad.to_str().expect("utf8")]),
+        &["bad.toml", "speed"],
+    );
+}
