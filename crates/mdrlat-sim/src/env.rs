@@ -94,7 +94,7 @@ pub struct Step<'a> {
 }
 
 /// Errors of the environment.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, Clone, thiserror::Error)]
 #[non_exhaustive]
 pub enum SimError {
     /// The configuration is unusable.
@@ -113,6 +113,9 @@ pub enum SimError {
     /// `step` was called before `reset` or after the episode ended.
     #[error("step() called on an episode that has ended (or never started): call reset() first")]
     NeedsReset,
+    /// A VecEnv worker thread stopped (it panicked).
+    #[error("a VecEnv worker thread stopped unexpectedly")]
+    WorkerDied,
     /// A VecEnv was given the wrong number of actions.
     #[error("expected {expected} actions, got {got}")]
     ActionCount {

@@ -1,16 +1,29 @@
-//! N environments stepped in parallel on a thread pool, with auto-reset.
+//! N environments stepped in parallel, with auto-reset.
 //!
 //! When an episode ends, its environment is reset at once (continuing its own random
 //! stream) and the true final observation is kept in [`VecEnv::final_observation`] for
-//! the replay buffer, as CleanRL and SB3 do. Keeping it costs a pointer swap, not a copy.
-//! The calling thread steps a share of the environments itself (see [`VecEnv::step`]).
+//! the replay buffer, as CleanRL and SB3 do. Keeping it costs a buffer swap, not a copy.
+//!
+//! The environments are split into one contiguous chunk per thread. The calling thread
+//! steps chunk 0 itself; each other chunk belongs to a dedicated worker thread that waits
+//! for the next step by spinning briefly, then yielding, then parking. A general-purpose
+//! pool (rayon) puts its threads to sleep between steps, and waking a thread costs tens of
+//! microseconds on a virtual machine — as much as stepping an environment.
 
 use crate::config::SimConfig;
 use crate::env::{Env, Observation, SimError, StepInfo};
 use crate::scene::StaticScene;
 use mdrlat_core::Action;
-use rayon::prelude::*;
-use std::sync::Arc;
+use std::ops::Deref;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// How long a worker spins for the next step before yielding, then parking.
+const SPIN: Duration = Duration::from_micros(300);
+/// How long it then yields before parking.
+const YIELD: Duration = Duration::from_millis(2);
 
 /// The outcome of one environment's step in a [`VecEnv`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -25,93 +38,235 @@ pub struct VecStep {
     pub info: StepInfo,
 }
 
+/// One thread's share of the environments, with its inputs and outputs.
+#[derive(Debug)]
+struct Chunk {
+    envs: Vec<Env>,
+    finals: Vec<Observation>,
+    actions: Vec<Action>,
+    /// Per environment: the last step's outcome.
+    results: Vec<Result<VecStep, SimError>>,
+    /// A reset request: environment `i` is seeded with `seed + first + i`.
+    reset_seed: Option<u64>,
+    first: usize,
+}
+
+impl Chunk {
+    /// Runs the pending reset or step on the current thread.
+    fn run(&mut self) {
+        if let Some(seed) = self.reset_seed.take() {
+            for (i, (env, r)) in self.envs.iter_mut().zip(&mut self.results).enumerate() {
+                let s = seed.wrapping_add((self.first + i) as u64);
+                *r = env.reset(Some(s)).map(|_| placeholder_step());
+            }
+            return;
+        }
+        let it =
+            self.envs.iter_mut().zip(&mut self.finals).zip(&self.actions).zip(&mut self.results);
+        for (((env, fin), &a), out) in it {
+            let stepped = env.step(a).map(|s| VecStep {
+                reward: s.reward,
+                terminated: s.terminated,
+                truncated: s.truncated,
+                info: s.info,
+            });
+            *out = stepped.and_then(|step| {
+                if step.terminated || step.truncated {
+                    env.swap_observation(fin);
+                    env.reset(None)?;
+                }
+                Ok(step)
+            });
+        }
+    }
+}
+
+fn placeholder_step() -> VecStep {
+    VecStep {
+        reward: 0.0,
+        terminated: false,
+        truncated: false,
+        info: StepInfo {
+            step: 0,
+            pose: Default::default(),
+            velocity: Default::default(),
+            command: Default::default(),
+            d_min: 0.0,
+            collision: None,
+            reward_terms: Default::default(),
+        },
+    }
+}
+
+fn lock(chunk: &Mutex<Chunk>) -> MutexGuard<'_, Chunk> {
+    // A worker that panicked mid-step leaves the lock poisoned; its data is still readable
+    // and `VecEnv::step` reports the dead worker as an error.
+    chunk.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Signals shared by the caller and the workers.
+#[derive(Debug, Default)]
+struct Control {
+    /// Bumped once per step or reset; workers run when it changes.
+    epoch: AtomicU64,
+    /// Workers finished with the current epoch.
+    done: AtomicUsize,
+    stop: AtomicBool,
+}
+
+#[derive(Debug)]
+struct Worker {
+    handle: JoinHandle<()>,
+}
+
+fn worker_loop(control: Arc<Control>, chunk: Arc<Mutex<Chunk>>) {
+    let mut seen = 0u64;
+    loop {
+        let started = Instant::now();
+        let mut spins = 0u32;
+        loop {
+            if control.stop.load(Ordering::Acquire) {
+                return;
+            }
+            let e = control.epoch.load(Ordering::Acquire);
+            if e != seen {
+                seen = e;
+                break;
+            }
+            spins = spins.wrapping_add(1);
+            let waited = if spins % 64 == 0 { started.elapsed() } else { Duration::ZERO };
+            if waited < SPIN {
+                std::hint::spin_loop();
+            } else if waited < SPIN + YIELD {
+                std::thread::yield_now();
+            } else {
+                std::thread::park_timeout(Duration::from_millis(10));
+            }
+        }
+        lock(&chunk).run();
+        control.done.fetch_add(1, Ordering::AcqRel);
+    }
+}
+
 /// A vector of environments over one shared scene.
 #[derive(Debug)]
 pub struct VecEnv {
-    envs: Vec<Env>,
-    finals: Vec<Observation>,
+    /// Chunk 0 is stepped by the caller, chunk k > 0 by worker k − 1.
+    chunks: Vec<Arc<Mutex<Chunk>>>,
+    /// First environment index of each chunk, plus the total at the end.
+    bounds: Vec<usize>,
+    workers: Vec<Worker>,
+    control: Arc<Control>,
     outcomes: Vec<VecStep>,
-    /// Threads stepping environments, the caller's included.
-    threads: usize,
-    /// The `threads − 1` helpers; `None` when stepping on the caller alone.
-    pool: Option<rayon::ThreadPool>,
 }
 
-/// Steps a contiguous chunk of environments on the current thread.
-fn step_chunk(
-    envs: &mut [Env],
-    finals: &mut [Observation],
-    actions: &[Action],
-    out: &mut [Option<Result<VecStep, SimError>>],
-) {
-    for (((env, fin), &a), o) in envs.iter_mut().zip(finals).zip(actions).zip(out) {
-        let stepped = env.step(a).map(|s| VecStep {
-            reward: s.reward,
-            terminated: s.terminated,
-            truncated: s.truncated,
-            info: s.info,
-        });
-        *o = Some(stepped.and_then(|step| {
-            if step.terminated || step.truncated {
-                env.swap_observation(fin);
-                env.reset(None)?;
-            }
-            Ok(step)
-        }));
+/// An observation inside a [`VecEnv`], borrowed for as long as this guard lives.
+pub struct ObservationRef<'a> {
+    chunk: MutexGuard<'a, Chunk>,
+    index: usize,
+    last: bool,
+}
+
+impl Deref for ObservationRef<'_> {
+    type Target = Observation;
+    fn deref(&self) -> &Observation {
+        if self.last {
+            &self.chunk.finals[self.index]
+        } else {
+            self.chunk.envs[self.index].observation()
+        }
     }
 }
 
 impl VecEnv {
-    /// `n` environments over `scene`, stepped on `threads` threads (0: all cores).
+    /// `n` environments over `scene`, stepped on `threads` threads (0: all cores), the
+    /// calling thread included.
     ///
     /// # Errors
     /// An invalid configuration.
     ///
     /// # Panics
-    /// If the thread pool cannot be created (the OS refused threads).
+    /// If the OS refuses to start a worker thread.
     pub fn new(
         scene: Arc<StaticScene>,
         config: SimConfig,
         n: usize,
         threads: usize,
     ) -> Result<Self, SimError> {
-        let envs = (0..n)
-            .map(|_| Env::new(scene.clone(), config.clone()))
-            .collect::<Result<Vec<_>, _>>()?;
         let threads = if threads == 0 {
             std::thread::available_parallelism().map_or(1, |t| t.get())
         } else {
             threads
         };
-        let pool = (threads > 1).then(|| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads - 1)
-                .thread_name(|i| format!("mdrlat-venv-{i}"))
-                .build()
-                .expect("cannot create the VecEnv thread pool")
-        });
-        Ok(Self {
-            finals: (0..n).map(|_| Observation::zeros()).collect(),
-            outcomes: Vec::with_capacity(n),
-            envs,
-            threads,
-            pool,
-        })
+        let parts = threads.clamp(1, n.max(1));
+        let bounds: Vec<usize> = (0..=parts).map(|k| k * n / parts).collect();
+        let mut chunks = Vec::with_capacity(parts);
+        for k in 0..parts {
+            let len = bounds[k + 1] - bounds[k];
+            let envs = (0..len)
+                .map(|_| Env::new(scene.clone(), config.clone()))
+                .collect::<Result<Vec<_>, _>>()?;
+            chunks.push(Arc::new(Mutex::new(Chunk {
+                envs,
+                finals: (0..len).map(|_| Observation::zeros()).collect(),
+                actions: Vec::with_capacity(len),
+                results: (0..len).map(|_| Err(SimError::NeedsReset)).collect(),
+                reset_seed: None,
+                first: bounds[k],
+            })));
+        }
+        let control = Arc::new(Control::default());
+        let workers = chunks[1..]
+            .iter()
+            .enumerate()
+            .map(|(k, chunk)| {
+                let (control, chunk) = (control.clone(), chunk.clone());
+                let handle = std::thread::Builder::new()
+                    .name(format!("mdrlat-venv-{}", k + 1))
+                    .spawn(move || worker_loop(control, chunk))
+                    .expect("cannot start a VecEnv worker thread");
+                Worker { handle }
+            })
+            .collect();
+        Ok(Self { chunks, bounds, workers, control, outcomes: Vec::with_capacity(n) })
     }
 
     /// Number of environments.
     pub fn len(&self) -> usize {
-        self.envs.len()
+        self.bounds[self.bounds.len() - 1]
     }
 
     /// True with no environments.
     pub fn is_empty(&self) -> bool {
-        self.envs.is_empty()
+        self.len() == 0
     }
 
-    /// Threads stepping the environments.
+    /// Threads stepping the environments, the caller's included.
     pub fn threads(&self) -> usize {
-        self.threads
+        self.chunks.len()
+    }
+
+    /// Runs chunk 0 here and the others on their workers; waits for all.
+    fn run_all(&mut self) -> Result<(), SimError> {
+        self.control.done.store(0, Ordering::Release);
+        self.control.epoch.fetch_add(1, Ordering::AcqRel);
+        for w in &self.workers {
+            w.handle.thread().unpark();
+        }
+        lock(&self.chunks[0]).run();
+        let mut spins = 0u32;
+        while self.control.done.load(Ordering::Acquire) < self.workers.len() {
+            spins = spins.wrapping_add(1);
+            if spins % 1024 == 0 {
+                if self.workers.iter().any(|w| w.handle.is_finished()) {
+                    return Err(SimError::WorkerDied);
+                }
+                std::thread::yield_now();
+            } else {
+                std::hint::spin_loop();
+            }
+        }
+        Ok(())
     }
 
     /// Resets every environment; environment `i` is seeded with `seed + i`.
@@ -119,83 +274,80 @@ impl VecEnv {
     /// # Errors
     /// An environment found no free start pose.
     pub fn reset(&mut self, seed: u64) -> Result<(), SimError> {
-        let envs = &mut self.envs;
-        let mut reset_all = || {
-            envs.par_iter_mut()
-                .enumerate()
-                .try_for_each(|(i, env)| env.reset(Some(seed.wrapping_add(i as u64))).map(|_| ()))
-        };
-        match &self.pool {
-            Some(pool) => pool.install(reset_all),
-            None => reset_all(),
+        for c in &self.chunks {
+            lock(c).reset_seed = Some(seed);
         }
+        self.run_all()?;
+        self.outcomes.clear();
+        for c in &self.chunks {
+            for r in &lock(c).results {
+                if let Err(e) = r {
+                    return Err(e.clone());
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Steps every environment with its action; finished episodes are reset at once.
     ///
-    /// The environments are split into one contiguous chunk per thread; the calling thread
-    /// steps the first chunk itself while the pool's threads step the others, so a step
-    /// costs no hand-off to a sleeping thread and one thread costs nothing at all.
-    ///
     /// # Errors
-    /// Wrong number of actions, or a reset found no free pose.
+    /// Wrong number of actions, a step before `reset`, or a reset that found no free pose.
     pub fn step(&mut self, actions: &[Action]) -> Result<&[VecStep], SimError> {
-        let n = self.envs.len();
-        if actions.len() != n {
-            return Err(SimError::ActionCount { expected: n, got: actions.len() });
+        if actions.len() != self.len() {
+            return Err(SimError::ActionCount { expected: self.len(), got: actions.len() });
         }
-        let mut results: Vec<Option<Result<VecStep, SimError>>> = (0..n).map(|_| None).collect();
-        let chunks = self.threads.min(n).max(1);
-        let bounds: Vec<usize> = (0..=chunks).map(|k| k * n / chunks).collect();
-        let mut envs: &mut [Env] = &mut self.envs;
-        let mut finals: &mut [Observation] = &mut self.finals;
-        let mut outs: &mut [Option<Result<VecStep, SimError>>] = &mut results;
-        let mut parts = Vec::with_capacity(chunks);
-        for k in 0..chunks {
-            let len = bounds[k + 1] - bounds[k];
-            let (e, e_rest) = std::mem::take(&mut envs).split_at_mut(len);
-            let (f, f_rest) = std::mem::take(&mut finals).split_at_mut(len);
-            let (o, o_rest) = std::mem::take(&mut outs).split_at_mut(len);
-            (envs, finals, outs) = (e_rest, f_rest, o_rest);
-            parts.push((e, f, &actions[bounds[k]..bounds[k + 1]], o));
+        for (k, c) in self.chunks.iter().enumerate() {
+            let mut c = lock(c);
+            c.actions.clear();
+            c.actions.extend_from_slice(&actions[self.bounds[k]..self.bounds[k + 1]]);
         }
-        let mut parts = parts.into_iter();
-        let first = parts.next();
-        match &self.pool {
-            Some(pool) => pool.in_place_scope(|scope| {
-                for (e, f, a, o) in parts {
-                    scope.spawn(move |_| step_chunk(e, f, a, o));
-                }
-                if let Some((e, f, a, o)) = first {
-                    step_chunk(e, f, a, o);
-                }
-            }),
-            None => {
-                if let Some((e, f, a, o)) = first {
-                    step_chunk(e, f, a, o);
-                }
-            }
-        }
+        self.run_all()?;
         self.outcomes.clear();
-        for r in results {
-            self.outcomes.push(r.unwrap_or(Err(SimError::NeedsReset))?);
+        for c in &self.chunks {
+            for r in &lock(c).results {
+                self.outcomes.push(r.clone()?);
+            }
         }
         Ok(&self.outcomes)
     }
 
+    fn locate(&self, i: usize) -> (usize, usize) {
+        assert!(i < self.len(), "environment {i} out of range (have {})", self.len());
+        let k = self.bounds.partition_point(|&b| b <= i) - 1;
+        (k, i - self.bounds[k])
+    }
+
     /// The current observation of environment `i` (after any auto-reset).
-    pub fn observation(&self, i: usize) -> &Observation {
-        self.envs[i].observation()
+    ///
+    /// # Panics
+    /// If `i >= len()`.
+    pub fn observation(&self, i: usize) -> ObservationRef<'_> {
+        let (k, index) = self.locate(i);
+        ObservationRef { chunk: lock(&self.chunks[k]), index, last: false }
     }
 
     /// The true last observation of environment `i`'s episode if the last step ended it.
-    pub fn final_observation(&self, i: usize) -> Option<&Observation> {
+    ///
+    /// # Panics
+    /// If `i >= len()`.
+    pub fn final_observation(&self, i: usize) -> Option<ObservationRef<'_>> {
         let o = self.outcomes.get(i)?;
-        (o.terminated || o.truncated).then_some(&self.finals[i])
+        let (k, index) = self.locate(i);
+        (o.terminated || o.truncated).then(|| ObservationRef {
+            chunk: lock(&self.chunks[k]),
+            index,
+            last: true,
+        })
     }
+}
 
-    /// The environments.
-    pub fn envs(&self) -> &[Env] {
-        &self.envs
+impl Drop for VecEnv {
+    fn drop(&mut self) {
+        self.control.stop.store(true, Ordering::Release);
+        for w in self.workers.drain(..) {
+            w.handle.thread().unpark();
+            let _ = w.handle.join();
+        }
     }
 }

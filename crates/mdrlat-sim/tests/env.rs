@@ -201,12 +201,12 @@ fn vec_env_matches_single_envs_and_keeps_final_observations() {
             );
             if s.terminated || s.truncated {
                 let fin = venv.final_observation(i).expect("final observation kept");
-                assert_eq!(fin, env.observation(), "true final observation");
+                assert_eq!(&*fin, env.observation(), "true final observation");
                 env.reset(None).expect("reset");
             } else {
                 assert!(venv.final_observation(i).is_none());
             }
-            assert_eq!(venv.observation(i), env.observation());
+            assert_eq!(&*venv.observation(i), env.observation());
         }
     }
 }
