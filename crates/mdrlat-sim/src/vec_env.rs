@@ -124,6 +124,7 @@ fn worker_loop(control: Arc<Control>, chunk: Arc<Mutex<Chunk>>) {
     loop {
         let started = Instant::now();
         let mut spins = 0u32;
+        let mut waited = Duration::ZERO;
         loop {
             if control.stop.load(Ordering::Acquire) {
                 return;
@@ -134,7 +135,9 @@ fn worker_loop(control: Arc<Control>, chunk: Arc<Mutex<Chunk>>) {
                 break;
             }
             spins = spins.wrapping_add(1);
-            let waited = if spins % 64 == 0 { started.elapsed() } else { Duration::ZERO };
+            if spins.is_multiple_of(64) {
+                waited = started.elapsed();
+            }
             if waited < SPIN {
                 std::hint::spin_loop();
             } else if waited < SPIN + YIELD {
@@ -257,7 +260,7 @@ impl VecEnv {
         let mut spins = 0u32;
         while self.control.done.load(Ordering::Acquire) < self.workers.len() {
             spins = spins.wrapping_add(1);
-            if spins % 1024 == 0 {
+            if spins.is_multiple_of(1024) {
                 if self.workers.iter().any(|w| w.handle.is_finished()) {
                     return Err(SimError::WorkerDied);
                 }
