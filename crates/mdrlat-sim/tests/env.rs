@@ -191,6 +191,10 @@ fn vec_env_matches_single_envs_and_keeps_final_observations() {
         })
         .collect();
     for t in 0..40 {
+        if t == 20 {
+            // Long enough for the workers to stop spinning and park: they must wake up.
+            std::thread::sleep(std::time::Duration::from_millis(30));
+        }
         let actions: Vec<Action> = (0..3).map(|i| act((t * 3 + i) % 10)).collect();
         let outs = venv.step(&actions).expect("step").to_vec();
         for (i, env) in singles.iter_mut().enumerate() {
