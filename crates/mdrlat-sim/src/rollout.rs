@@ -4,6 +4,7 @@
 use crate::env::{Env, SimError, StepInfo};
 use crate::policy::Policy;
 use mdrlat_core::Action;
+use mdrlat_geom::Pose2;
 use std::fmt::Write as _;
 
 /// One step of a trajectory.
@@ -48,19 +49,21 @@ impl TrajectoryRow {
     }
 }
 
-/// Runs `policy` from a reset with `seed` for at most `max_steps` steps or until the
-/// episode ends, calling `on_step` after every step (e.g. to draw a frame).
+/// Runs `policy` for at most `max_steps` steps or until the episode ends, starting with
+/// `env.reset_with(seed, pose)` (`None`, `None`: continue the random streams, draw a pose),
+/// and calls `on_step` after every step (e.g. to write a row or draw a frame).
 ///
 /// # Errors
-/// The reset found no free pose.
-pub fn run_episode(
+/// The reset found no free pose, or `on_step` failed.
+pub fn run_episode<E: From<SimError>>(
     env: &mut Env,
     policy: &mut dyn Policy,
-    seed: u64,
+    seed: Option<u64>,
+    pose: Option<Pose2>,
     max_steps: u32,
-    mut on_step: impl FnMut(&Env, &TrajectoryRow),
-) -> Result<Vec<TrajectoryRow>, SimError> {
-    env.reset(Some(seed))?;
+    mut on_step: impl FnMut(&Env, &TrajectoryRow) -> Result<(), E>,
+) -> Result<Vec<TrajectoryRow>, E> {
+    env.reset_with(seed, pose)?;
     let mut rows = Vec::new();
     for _ in 0..max_steps {
         let action = policy.act(env.observation());
@@ -73,7 +76,7 @@ pub fn run_episode(
             info: s.info,
         };
         rows.push(row);
-        on_step(env, &row);
+        on_step(env, &row)?;
         if row.terminated || row.truncated {
             break;
         }

@@ -146,7 +146,10 @@ fn same_seed_same_bytes_and_different_seed_differs() {
     let run = |seed: u64| {
         let mut env = Env::from_world(world.clone(), SimConfig::default()).expect("env");
         let mut policy = RandomPolicy::new(seed);
-        let rows = run_episode(&mut env, &mut policy, seed, 120, |_, _| {}).expect("episode");
+        let rows = run_episode(&mut env, &mut policy, Some(seed), None, 120, |_, _| {
+            Ok::<_, mdrlat_sim::SimError>(())
+        })
+        .expect("episode");
         let csv: String = rows.iter().map(|r| r.to_csv() + "\n").collect();
         (csv, frames_bytes(&env))
     };
@@ -164,7 +167,10 @@ fn golden_rollout_hash() {
     let world = mdrlat_world::builtin::get("example").expect("builtin").expect("valid");
     let mut env = Env::from_world(world, SimConfig::default()).expect("env");
     let mut policy = RandomPolicy::new(42);
-    let rows = run_episode(&mut env, &mut policy, 42, 200, |_, _| {}).expect("episode");
+    let rows = run_episode(&mut env, &mut policy, Some(42), None, 200, |_, _| {
+        Ok::<_, mdrlat_sim::SimError>(())
+    })
+    .expect("episode");
     let mut csv = String::from(CSV_HEADER);
     csv.push('\n');
     for r in &rows {

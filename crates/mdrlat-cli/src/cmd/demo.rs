@@ -2,15 +2,12 @@
 //! rendered to a GIF and pictures, every built-in world drawn, and the simulator benchmark.
 
 use super::bench::{SimArgs, cpu_model, measure};
-use super::rollout::{PolicyKind, make_policy};
-use super::{ensure_dir, load_world, make_env, px_per_m, snapshot};
+use super::rollout::{PolicyKind, Recorder, make_policy};
+use super::{ensure_dir, load_world, make_env, px_per_m};
 use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result};
-use mdrlat_geom::Vec2;
-use mdrlat_render::{GifWriter, Scene, top_view};
-use mdrlat_sim::rollout::{CSV_HEADER, TrajectoryRow};
-use std::io::Write;
+use mdrlat_render::{Scene, top_view};
 use std::path::PathBuf;
 
 /// Arguments of `mdrlat demo`.
@@ -46,61 +43,27 @@ pub fn run(a: &Args) -> Result<()> {
     let mut policy = make_policy(a.policy, &env, a.seed);
     env.reset(Some(a.seed))?;
     let scale = px_per_m(env.world(), 480.0);
-    let mut trail: Vec<Vec2> = vec![env.pose().position()];
-    let start = snapshot(
-        &env,
-        &trail,
-        &format!("{}  seed {}  start", env.world().name, a.seed),
-        false,
-        scale,
-    );
-    start.save_png(&a.out.join("start.png"))?;
     let gif_path = a.out.join("episode.gif");
-    let mut gif = GifWriter::create(&gif_path, start.width, start.height, 20)?;
-    gif.add_frame(&start)?;
     let csv_path = a.out.join("trajectory.csv");
-    let mut csv = std::io::BufWriter::new(
-        std::fs::File::create(&csv_path)
-            .with_context(|| format!("cannot create {}", csv_path.display()))?,
-    );
-    writeln!(csv, "{CSV_HEADER}")?;
-    let pb = progress::bar(u64::from(a.steps), "episode");
-    let (mut sum, mut last) = (0.0f32, None);
-    for _ in 0..a.steps {
-        let action = policy.act(env.observation());
-        let s = env.step(action)?;
-        let row = TrajectoryRow {
-            action,
-            reward: s.reward,
-            terminated: s.terminated,
-            truncated: s.truncated,
-            info: s.info,
-        };
-        sum += row.reward;
-        writeln!(csv, "{}", row.to_csv())?;
-        trail.push(row.info.pose.position());
-        let caption = format!(
-            "{}  step {}  v {:.2} w {:+.2}  r {:+.2}  sum {:+.1}",
-            env.world().name,
-            row.info.step,
-            row.info.velocity.v,
-            row.info.velocity.w,
-            row.reward,
-            sum
-        );
-        let frame = snapshot(&env, &trail, &caption, row.terminated, scale);
-        gif.add_frame(&frame)?;
-        last = Some((row, frame));
-        pb.inc(1);
-        if row.terminated || row.truncated {
-            break;
-        }
+    let mut rec = Recorder::create(&csv_path, Some(&gif_path), scale)?;
+    let start_caption = format!("{}  seed {}  start", env.world().name, a.seed);
+    rec.frame(&env, &[env.pose().position()], &start_caption, false)?;
+    if let Some(start) = &rec.last_frame {
+        start.save_png(&a.out.join("start.png"))?;
     }
+    let pb = progress::bar(u64::from(a.steps), "episode");
+    let start_pose = Some(env.pose());
+    let rows =
+        rec.episode(&mut env, policy.as_mut(), (Some(a.seed), start_pose), a.steps, "", || {
+            pb.inc(1)
+        })?;
     pb.finish_and_clear();
-    csv.flush()?;
-    gif.finish()?;
-    let (row, frame) = last.context("the episode took no step (--steps 0?)")?;
-    frame.save_png(&a.out.join("end.png"))?;
+    if let Some(end) = &rec.last_frame {
+        end.save_png(&a.out.join("end.png"))?;
+    }
+    rec.finish()?;
+    let row = rows.last().context("the episode took no step (--steps 0?)")?;
+    let sum: f32 = rows.iter().map(|r| r.reward).sum();
     let ending = match (row.terminated, row.info.collision) {
         (true, Some(c)) => format!("collision ({c:?})"),
         _ if row.truncated => "time limit".to_string(),

@@ -5,12 +5,12 @@ use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result};
 use mdrlat_core::Action;
-use mdrlat_geom::Vec2;
-use mdrlat_render::GifWriter;
-use mdrlat_sim::rollout::{CSV_HEADER, TrajectoryRow};
+use mdrlat_geom::{Pose2, Vec2};
+use mdrlat_render::{GifWriter, Image};
+use mdrlat_sim::rollout::{CSV_HEADER, TrajectoryRow, run_episode};
 use mdrlat_sim::{ConstantPolicy, Env, Policy, RandomPolicy, WanderPolicy};
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The scripted policies.
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
@@ -73,74 +73,121 @@ pub struct Args {
     config: Option<PathBuf>,
 }
 
+/// Writes episodes as CSV rows and, optionally, GIF frames: shared by `rollout` and `demo`.
+pub struct Recorder {
+    csv: std::io::BufWriter<std::fs::File>,
+    gif: Option<(PathBuf, Option<GifWriter<std::io::BufWriter<std::fs::File>>>)>,
+    scale: f32,
+    /// The last frame drawn (with a GIF).
+    pub last_frame: Option<Image>,
+}
+
+impl Recorder {
+    /// Creates the CSV (with its header) and remembers where a GIF goes, if anywhere.
+    pub fn create(csv: &Path, gif: Option<&Path>, scale: f32) -> Result<Self> {
+        ensure_parent(csv)?;
+        let file = std::fs::File::create(csv)
+            .with_context(|| format!("cannot create {}", csv.display()))?;
+        let mut csv = std::io::BufWriter::new(file);
+        writeln!(csv, "{CSV_HEADER}")?;
+        if let Some(g) = gif {
+            ensure_parent(g)?;
+        }
+        Ok(Self { csv, gif: gif.map(|g| (g.to_path_buf(), None)), scale, last_frame: None })
+    }
+
+    /// Adds a frame of the environment's current state to the GIF (if any).
+    pub fn frame(
+        &mut self,
+        env: &Env,
+        trail: &[Vec2],
+        caption: &str,
+        collided: bool,
+    ) -> Result<()> {
+        let Some((path, writer)) = self.gif.as_mut() else { return Ok(()) };
+        let frame = snapshot(env, trail, caption, collided, self.scale);
+        if writer.is_none() {
+            *writer = Some(GifWriter::create(path, frame.width, frame.height, 20)?);
+        }
+        if let Some(w) = writer.as_mut() {
+            w.add_frame(&frame)?;
+        }
+        self.last_frame = Some(frame);
+        Ok(())
+    }
+
+    /// Runs one episode of `policy`, recording every step; `tick` is called once per step.
+    pub fn episode(
+        &mut self,
+        env: &mut Env,
+        policy: &mut dyn Policy,
+        (seed, pose): (Option<u64>, Option<Pose2>),
+        steps: u32,
+        label: &str,
+        mut tick: impl FnMut(),
+    ) -> Result<Vec<TrajectoryRow>> {
+        let mut trail: Vec<Vec2> = Vec::new();
+        let mut sum = 0.0f32;
+        run_episode(env, policy, seed, pose, steps, |env, row| -> Result<()> {
+            writeln!(self.csv, "{}", row.to_csv())?;
+            sum += row.reward;
+            trail.push(row.info.pose.position());
+            let i = &row.info;
+            let caption = format!(
+                "{}  {label}step {}  v {:.2} w {:+.2}  r {:+.2}  sum {:+.1}",
+                env.world().name,
+                i.step,
+                i.velocity.v,
+                i.velocity.w,
+                row.reward,
+                sum
+            );
+            self.frame(env, &trail, &caption, row.terminated)?;
+            tick();
+            Ok(())
+        })
+    }
+
+    /// Flushes the CSV and closes the GIF.
+    pub fn finish(mut self) -> Result<()> {
+        self.csv.flush()?;
+        if let Some((_, Some(w))) = self.gif.take() {
+            w.finish()?;
+        }
+        Ok(())
+    }
+}
+
 /// Runs `mdrlat rollout`.
 pub fn run(a: &Args) -> Result<()> {
     let config = Config::load_or_default(a.config.as_deref())?;
     let world = load_world(&a.world)?;
     let mut env = make_env(world, &config.sim)?;
     let mut policy = make_policy(a.policy, &env, a.seed);
-    ensure_parent(&a.out)?;
-    let mut csv = std::io::BufWriter::new(
-        std::fs::File::create(&a.out)
-            .with_context(|| format!("cannot create {}", a.out.display()))?,
-    );
-    writeln!(csv, "{CSV_HEADER}")?;
     let scale = px_per_m(env.world(), 480.0);
-    let mut gif: Option<GifWriter<_>> = None;
+    let mut rec = Recorder::create(&a.out, a.gif.as_deref(), scale)?;
     let pb = progress::bar(u64::from(a.steps) * u64::from(a.episodes), "rollout");
-    let (mut total_steps, mut collisions, mut total_reward) = (0u64, 0u32, 0.0f64);
+    let (mut total_steps, mut collisions, mut total_reward) = (0usize, 0u32, 0.0f64);
     for episode in 0..a.episodes {
-        let pose = if episode == 0 { a.pose.as_deref().map(parse_pose).transpose()? } else { None };
-        env.reset_with(if episode == 0 { Some(a.seed) } else { None }, pose)?;
-        let mut trail: Vec<Vec2> = vec![env.pose().position()];
-        let mut ep_reward = 0.0f32;
-        for _ in 0..a.steps {
-            let action = policy.act(env.observation());
-            let s = env.step(action)?;
-            let row = TrajectoryRow {
-                action,
-                reward: s.reward,
-                terminated: s.terminated,
-                truncated: s.truncated,
-                info: s.info,
-            };
-            writeln!(csv, "{}", row.to_csv())?;
-            ep_reward += row.reward;
-            trail.push(row.info.pose.position());
-            if let Some(path) = &a.gif {
-                let caption = format!(
-                    "{}  ep {}  step {}  v {:.2} w {:+.2}  r {:+.2}  sum {:+.1}",
-                    env.world().name,
-                    episode,
-                    row.info.step,
-                    row.info.velocity.v,
-                    row.info.velocity.w,
-                    row.reward,
-                    ep_reward
-                );
-                let frame = snapshot(&env, &trail, &caption, row.terminated, scale);
-                if gif.is_none() {
-                    ensure_parent(path)?;
-                    gif = Some(GifWriter::create(path, frame.width, frame.height, 20)?);
-                }
-                if let Some(g) = gif.as_mut() {
-                    g.add_frame(&frame)?;
-                }
-            }
-            pb.inc(1);
-            total_steps += 1;
-            if row.terminated || row.truncated {
-                collisions += u32::from(row.terminated);
-                break;
-            }
-        }
-        total_reward += f64::from(ep_reward);
+        let start = if episode == 0 {
+            (Some(a.seed), a.pose.as_deref().map(parse_pose).transpose()?)
+        } else {
+            (None, None)
+        };
+        let rows = rec.episode(
+            &mut env,
+            policy.as_mut(),
+            start,
+            a.steps,
+            &format!("ep {episode}  "),
+            || pb.inc(1),
+        )?;
+        total_steps += rows.len();
+        collisions += u32::from(rows.last().is_some_and(|r| r.terminated));
+        total_reward += rows.iter().map(|r| f64::from(r.reward)).sum::<f64>();
     }
     pb.finish_and_clear();
-    csv.flush()?;
-    if let Some(g) = gif {
-        g.finish()?;
-    }
+    rec.finish()?;
     out!(
         "{} episode(s), {} steps, {} collision(s), mean episode reward {:.2}; wrote {}{}",
         a.episodes,
