@@ -1,0 +1,26 @@
+//! The MDRLAT networks (SPEC §3, the authors' code), on burn.
+//!
+//! One module, [`QNet`], covers all six variants of the paper (laser-only, depth-only,
+//! multi, multi-AT, multi-BF, MDRLAT) and the goal-conditioned navigation input: each part
+//! is an `Option` switched on by the [`Variant`] and the config, as burn's examples do. The
+//! library takes a `&Device` and never picks one.
+//!
+//! ```text
+//! depth [B,4,128,160] ─ conv 16@10x14/8 ─ conv 32@4x4/2 ─ conv 32@3x3/1 ─ flatten 2560 ─┐
+//!                                                  (BF) Linear 2560→128 = d ─┐          │
+//! laser [B,4,512] ─ conv1d 16@5/4 ─ 32@3/2 ─ 32@3/2 ─ flatten 1024 ──────────┼──────────┤
+//!                                                  (BF) Linear 1024→64  = l ─┤          │
+//!                                   f = ReLU(Linear 8192→512 (vec(d lᵀ))) ───┴─ concat h (4096)
+//! h ─ V: Linear→512→1, A: Linear→512→10, Q = V + A − mean(A)        (paper eq. 11)
+//! h ─ (AT) Linear→512→6: (v, ω) at t−2, t−1, t                     (paper eq. 12)
+//! ```
+//! Every convolution uses TensorFlow "SAME" padding and is followed by a ReLU.
+
+mod net;
+mod variant;
+
+pub use net::{QNet, QNetConfig, QOutput, bilinear, dueling};
+pub use variant::{Variant, VariantParseError};
+
+/// The burn re-exports the rest of mdrlat builds on, so every crate uses the same version.
+pub use burn;

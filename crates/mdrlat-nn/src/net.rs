@@ -1,0 +1,281 @@
+//! The Q-network: two convolutional streams, optional bilinear fusion, a dueling head and an
+//! optional auxiliary velocity head.
+
+use crate::variant::Variant;
+use burn::nn::conv::{Conv1d, Conv1dConfig, Conv2d, Conv2dConfig};
+use burn::nn::{Linear, LinearConfig, PaddingConfig1d, PaddingConfig2d};
+use burn::prelude::*;
+use burn::tensor::activation::relu;
+
+/// Settings of a [`QNet`]. Defaults are the paper's input sizes.
+#[derive(Config, Debug)]
+pub struct QNetConfig {
+    /// Which sensors and modules.
+    pub variant: Variant,
+    /// Length of the goal vector appended to the representation (0: obstacle avoidance;
+    /// 3 for navigation: distance, sin and cos of the bearing in the robot frame).
+    #[config(default = 0)]
+    pub goal_dim: usize,
+    /// Number of discrete actions (paper Table 1).
+    #[config(default = 10)]
+    pub actions: usize,
+    /// Stacked frames per sensor.
+    #[config(default = 4)]
+    pub frames: usize,
+    /// Depth image rows.
+    #[config(default = 128)]
+    pub depth_rows: usize,
+    /// Depth image columns.
+    #[config(default = 160)]
+    pub depth_cols: usize,
+    /// Laser beams.
+    #[config(default = 512)]
+    pub beams: usize,
+}
+
+/// Output size of a TensorFlow-"SAME" convolution with `stride`.
+fn same(len: usize, stride: usize) -> usize {
+    len.div_ceil(stride)
+}
+
+impl QNetConfig {
+    /// Length of the flattened depth features: 32 x 8 x 10 = 2560 at 128 x 160.
+    pub fn depth_features(&self) -> usize {
+        32 * same(same(self.depth_rows, 8), 2) * same(same(self.depth_cols, 8), 2)
+    }
+
+    /// Length of the flattened laser features: 32 x 32 = 1024 at 512 beams.
+    pub fn laser_features(&self) -> usize {
+        32 * same(same(same(self.beams, 4), 2), 2)
+    }
+
+    /// Length of the representation `h` fed to the heads (4096 for MDRLAT).
+    pub fn representation(&self) -> usize {
+        let v = self.variant;
+        let mut h = self.goal_dim;
+        if v.uses_depth() {
+            h += self.depth_features();
+        }
+        if v.uses_laser() {
+            h += self.laser_features();
+        }
+        if v.bilinear_fusion() {
+            h += FUSION_OUT;
+        }
+        h
+    }
+
+    /// Builds the network with freshly initialised weights on `device`.
+    pub fn init(&self, device: &Device) -> QNet {
+        let v = self.variant;
+        let conv2 = |c: [usize; 2], k: [usize; 2], s: usize| {
+            Conv2dConfig::new(c, k)
+                .with_stride([s, s])
+                .with_padding(PaddingConfig2d::Same)
+                .init(device)
+        };
+        let conv1 = |c: [usize; 2], k: usize, s: usize| {
+            Conv1dConfig::new(c[0], c[1], k)
+                .with_stride(s)
+                .with_padding(PaddingConfig1d::Same)
+                .init(device)
+        };
+        let linear = |i: usize, o: usize| LinearConfig::new(i, o).init(device);
+        let head = |out: usize| Head {
+            hidden: linear(self.representation(), HIDDEN),
+            out: linear(HIDDEN, out),
+        };
+        QNet {
+            depth: v.uses_depth().then(|| DepthStream {
+                c1: conv2([self.frames, 16], [10, 14], 8),
+                c2: conv2([16, 32], [4, 4], 2),
+                c3: conv2([32, 32], [3, 3], 1),
+            }),
+            laser: v.uses_laser().then(|| LaserStream {
+                c1: conv1([self.frames, 16], 5, 4),
+                c2: conv1([16, 32], 3, 2),
+                c3: conv1([32, 32], 3, 2),
+            }),
+            fusion: v.bilinear_fusion().then(|| Fusion {
+                depth: linear(self.depth_features(), FUSION_DEPTH),
+                laser: linear(self.laser_features(), FUSION_LASER),
+                out: linear(FUSION_DEPTH * FUSION_LASER, FUSION_OUT),
+            }),
+            value: head(1),
+            advantage: head(self.actions),
+            velocity: v.auxiliary_task().then(|| head(VELOCITY_OUT)),
+        }
+    }
+}
+
+/// Width of the head's hidden layers.
+const HIDDEN: usize = 512;
+/// Bilinear fusion sizes of the paper: L_d = 128, L_l = 64, K = 512.
+const FUSION_DEPTH: usize = 128;
+const FUSION_LASER: usize = 64;
+const FUSION_OUT: usize = 512;
+/// (v, ω) at t−2, t−1, t.
+const VELOCITY_OUT: usize = 6;
+
+/// The depth stream: three 2D convolutions.
+#[derive(Module, Debug)]
+pub struct DepthStream {
+    c1: Conv2d,
+    c2: Conv2d,
+    c3: Conv2d,
+}
+
+impl DepthStream {
+    /// # Shapes
+    /// `[B, 4, 128, 160]` → `[B, 2560]`.
+    fn forward(&self, x: Tensor<4>) -> Tensor<2> {
+        let x = relu(self.c1.forward(x)); // [B, 16, 16, 20]
+        let x = relu(self.c2.forward(x)); // [B, 32, 8, 10]
+        let x = relu(self.c3.forward(x)); // [B, 32, 8, 10]
+        x.flatten(1, 3) // [B, 2560]
+    }
+}
+
+/// The laser stream: three 1D convolutions.
+#[derive(Module, Debug)]
+pub struct LaserStream {
+    c1: Conv1d,
+    c2: Conv1d,
+    c3: Conv1d,
+}
+
+impl LaserStream {
+    /// # Shapes
+    /// `[B, 4, 512]` → `[B, 1024]`.
+    fn forward(&self, x: Tensor<3>) -> Tensor<2> {
+        let x = relu(self.c1.forward(x)); // [B, 16, 128]
+        let x = relu(self.c2.forward(x)); // [B, 32, 64]
+        let x = relu(self.c3.forward(x)); // [B, 32, 32]
+        x.flatten(1, 2) // [B, 1024]
+    }
+}
+
+/// Bilinear fusion (paper eqs. 7–8).
+#[derive(Module, Debug)]
+pub struct Fusion {
+    depth: Linear,
+    laser: Linear,
+    out: Linear,
+}
+
+/// `vec(d lᵀ)` of paper eq. (7), batched: entry `i·L_l + j` is `d_i · l_j`, so a linear
+/// layer on it computes eq. (8), `Σ_ij w_ijk d_i l_j`.
+///
+/// # Shapes
+/// `d: [B, L_d]`, `l: [B, L_l]` → `[B, L_d·L_l]`.
+#[doc(alias = "eq7")]
+#[doc(alias = "eq8")]
+pub fn bilinear(d: Tensor<2>, l: Tensor<2>) -> Tensor<2> {
+    let outer = d.unsqueeze_dim::<3>(2).matmul(l.unsqueeze_dim::<3>(1)); // [B, L_d, L_l]
+    outer.flatten(1, 2) // [B, L_d·L_l]
+}
+
+impl Fusion {
+    /// # Shapes
+    /// `depth: [B, 2560]`, `laser: [B, 1024]` → `[B, 512]`.
+    fn forward(&self, depth: Tensor<2>, laser: Tensor<2>) -> Tensor<2> {
+        let d = self.depth.forward(depth); // [B, 128]
+        let l = self.laser.forward(laser); // [B, 64]
+        relu(self.out.forward(bilinear(d, l))) // [B, 512]
+    }
+}
+
+/// Linear → ReLU → Linear.
+#[derive(Module, Debug)]
+pub struct Head {
+    hidden: Linear,
+    out: Linear,
+}
+
+impl Head {
+    /// # Shapes
+    /// `[B, h]` → `[B, out]`.
+    fn forward(&self, h: Tensor<2>) -> Tensor<2> {
+        self.out.forward(relu(self.hidden.forward(h)))
+    }
+}
+
+/// Paper eq. (11): `Q(s, a) = V(s) + A(s, a) − mean_a' A(s, a')`.
+///
+/// # Shapes
+/// `value: [B, 1]`, `advantage: [B, A]` → `[B, A]`.
+#[doc(alias = "eq11")]
+pub fn dueling(value: Tensor<2>, advantage: Tensor<2>) -> Tensor<2> {
+    let mean = advantage.clone().mean_dim(1); // [B, 1]
+    value + advantage - mean
+}
+
+/// The network of SPEC §3, configured by [`QNetConfig`].
+#[derive(Module, Debug)]
+pub struct QNet {
+    depth: Option<DepthStream>,
+    laser: Option<LaserStream>,
+    fusion: Option<Fusion>,
+    value: Head,
+    advantage: Head,
+    velocity: Option<Head>,
+}
+
+/// What [`QNet::forward`] returns.
+#[derive(Debug, Clone)]
+pub struct QOutput {
+    /// Q-values, `[B, actions]`.
+    pub q: Tensor<2>,
+    /// Estimated `(v_{t−2}, ω_{t−2}, v_{t−1}, ω_{t−1}, v_t, ω_t)`, `[B, 6]`, with the
+    /// auxiliary task.
+    pub velocity: Option<Tensor<2>>,
+}
+
+impl QNet {
+    /// The representation `h = concat(depth features, fusion, laser features, goal)`.
+    ///
+    /// # Shapes
+    /// `laser: [B, 4, 512]`, `depth: [B, 4, 128, 160]` (each when the variant reads it),
+    /// `goal: [B, goal_dim]` → `[B, h]`.
+    ///
+    /// # Panics
+    /// If an input the variant needs is missing.
+    pub fn representation(
+        &self,
+        laser: Option<Tensor<3>>,
+        depth: Option<Tensor<4>>,
+        goal: Option<Tensor<2>>,
+    ) -> Tensor<2> {
+        let d = self
+            .depth
+            .as_ref()
+            .map(|s| s.forward(depth.expect("this variant reads the depth camera")));
+        let l =
+            self.laser.as_ref().map(|s| s.forward(laser.expect("this variant reads the laser")));
+        let f = match (&self.fusion, &d, &l) {
+            (Some(fusion), Some(d), Some(l)) => Some(fusion.forward(d.clone(), l.clone())),
+            _ => None,
+        };
+        let parts: Vec<Tensor<2>> = [d, f, l, goal].into_iter().flatten().collect();
+        Tensor::cat(parts, 1)
+    }
+
+    /// Q-values and, with the auxiliary task, the velocity estimate.
+    ///
+    /// # Shapes
+    /// As [`QNet::representation`]; `q: [B, actions]`, `velocity: [B, 6]`.
+    ///
+    /// # Panics
+    /// If an input the variant needs is missing.
+    pub fn forward(
+        &self,
+        laser: Option<Tensor<3>>,
+        depth: Option<Tensor<4>>,
+        goal: Option<Tensor<2>>,
+    ) -> QOutput {
+        let h = self.representation(laser, depth, goal);
+        let q = dueling(self.value.forward(h.clone()), self.advantage.forward(h.clone()));
+        let velocity = self.velocity.as_ref().map(|head| head.forward(h));
+        QOutput { q, velocity }
+    }
+}
