@@ -24,4 +24,8 @@ pub mod robot {
     /// Body height, metres: obstacles whose height interval overlaps `[0, BODY_HEIGHT_M]`
     /// can hit the bumper.
     pub const BODY_HEIGHT_M: f32 = 0.45;
+    /// Default extra clearance between the footprint and any obstacle at a reset pose,
+    /// metres. World validation checks every spawn region has room for
+    /// `RADIUS_M + SPAWN_CLEARANCE_M`, the same test `reset` applies.
+    pub const SPAWN_CLEARANCE_M: f32 = 0.1;
 }

@@ -54,8 +54,9 @@ pub fn normalize_depth(depth_m: &[f32], out: &mut [f32]) {
 /// A ring buffer of the last [`FRAME_STACK`] frames of one sensor.
 ///
 /// Pushing a frame writes one frame in place; nothing is shifted or reallocated. Frames are
-/// read oldest to newest with [`FrameStack::frame`].
-#[derive(Debug, Clone, PartialEq)]
+/// read oldest to newest with [`FrameStack::frame`]. Two stacks are equal when their frames
+/// are, wherever the ring's head happens to be.
+#[derive(Debug, Clone)]
 pub struct FrameStack {
     data: Box<[f32]>,
     frame_len: usize,
@@ -115,6 +116,13 @@ impl FrameStack {
     }
 }
 
+impl PartialEq for FrameStack {
+    fn eq(&self, other: &Self) -> bool {
+        self.frame_len == other.frame_len
+            && (0..FRAME_STACK).all(|k| self.frame(k) == other.frame(k))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -145,5 +153,23 @@ mod tests {
         let mut out = vec![0.0; 8];
         s.write_stacked(&mut out, |a, b| b.copy_from_slice(a));
         assert_eq!(out, [3.0, -3.0, 4.0, -4.0, 5.0, -5.0, 6.0, -6.0]);
+        // Equality is by frames, not by where the ring's head is.
+        let mut t = FrameStack::new(2);
+        for i in 3..=6 {
+            t.push_slot().copy_from_slice(&[i as f32, -(i as f32)]);
+        }
+        t.push_slot().copy_from_slice(&[9.0, 9.0]);
+        assert_ne!(s, t);
+        let mut u = FrameStack::new(2);
+        for i in 2..=6 {
+            u.push_slot().copy_from_slice(&[i as f32, -(i as f32)]);
+        }
+        u.push_slot().copy_from_slice(&[6.0, -6.0]);
+        assert_ne!(s, u);
+        let mut w = FrameStack::new(2);
+        for i in 1..=6 {
+            w.push_slot().copy_from_slice(&[i as f32, -(i as f32)]);
+        }
+        assert_eq!(s, w, "same frames, different head");
     }
 }

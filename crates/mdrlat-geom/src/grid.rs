@@ -7,6 +7,12 @@
 use crate::aabb::Aabb;
 use crate::math::Vec2;
 
+/// Most cells along a side: a huge world gets bigger cells, not more of them.
+const MAX_CELLS_PER_SIDE: f32 = 256.0;
+/// Obstacles covering more cells than this are kept in one list checked by every query,
+/// so no obstacle costs more than this many grid entries.
+const MAX_CELLS_PER_ITEM: usize = 1024;
+
 /// Broadphase grid of obstacle indices.
 #[derive(Debug, Clone)]
 pub struct Grid {
@@ -15,8 +21,10 @@ pub struct Grid {
     nx: usize,
     ny: usize,
     /// `starts[c]..starts[c+1]` indexes `items` for cell `c`.
-    starts: Vec<u32>,
+    starts: Vec<usize>,
     items: Vec<u32>,
+    /// Obstacles too large for the cells: reported by every query.
+    always: Vec<u32>,
     count: usize,
 }
 
@@ -28,12 +36,17 @@ pub struct GridScratch {
 }
 
 impl Grid {
-    /// Builds a grid covering `bounds` with square cells of `cell_m` metres over obstacles
-    /// with the given bounding rectangles. Obstacles outside `bounds` land in border cells.
+    /// Builds a grid covering `bounds` with square cells of `cell_m` metres (larger for huge
+    /// worlds: at most 256 cells a side) over obstacles with the given bounding rectangles.
+    /// Obstacles outside `bounds` land in border cells; obstacles spanning more than 1024
+    /// cells are checked by every query instead, so memory stays linear in the obstacles.
     pub fn build(bounds: Aabb, cell_m: f32, aabbs: &[Aabb]) -> Self {
         let size = bounds.size();
-        let nx = ((size.x / cell_m).ceil() as usize).clamp(1, 4096);
-        let ny = ((size.y / cell_m).ceil() as usize).clamp(1, 4096);
+        let longest = size.x.max(size.y);
+        let cell_m =
+            if longest.is_finite() { cell_m.max(longest / MAX_CELLS_PER_SIDE) } else { cell_m };
+        let nx = ((size.x / cell_m).ceil() as usize).clamp(1, MAX_CELLS_PER_SIDE as usize);
+        let ny = ((size.y / cell_m).ceil() as usize).clamp(1, MAX_CELLS_PER_SIDE as usize);
         let mut grid = Grid {
             origin: bounds.min,
             cell_m,
@@ -41,11 +54,23 @@ impl Grid {
             ny,
             starts: vec![0; nx * ny + 1],
             items: Vec::new(),
+            always: Vec::new(),
             count: aabbs.len(),
         };
+        let spans: Vec<Option<(usize, usize, usize, usize)>> = aabbs
+            .iter()
+            .map(|b| {
+                let span = grid.cell_span(b);
+                let (x0, y0, x1, y1) = span;
+                ((x1 - x0 + 1) * (y1 - y0 + 1) <= MAX_CELLS_PER_ITEM).then_some(span)
+            })
+            .collect();
         // Two passes: count per cell, then fill.
-        for b in aabbs {
-            let (x0, y0, x1, y1) = grid.cell_span(b);
+        for (i, span) in spans.iter().enumerate() {
+            let Some((x0, y0, x1, y1)) = *span else {
+                grid.always.push(i as u32);
+                continue;
+            };
             for y in y0..=y1 {
                 for x in x0..=x1 {
                     grid.starts[y * nx + x + 1] += 1;
@@ -56,13 +81,13 @@ impl Grid {
             grid.starts[c + 1] += grid.starts[c];
         }
         let mut fill = grid.starts.clone();
-        grid.items = vec![0; grid.starts[nx * ny] as usize];
-        for (i, b) in aabbs.iter().enumerate() {
-            let (x0, y0, x1, y1) = grid.cell_span(b);
+        grid.items = vec![0; grid.starts[nx * ny]];
+        for (i, span) in spans.iter().enumerate() {
+            let Some((x0, y0, x1, y1)) = *span else { continue };
             for y in y0..=y1 {
                 for x in x0..=x1 {
                     let c = y * nx + x;
-                    grid.items[fill[c] as usize] = i as u32;
+                    grid.items[fill[c]] = i as u32;
                     fill[c] += 1;
                 }
             }
@@ -94,11 +119,15 @@ impl Grid {
             scratch.generation = 1;
         }
         let g = scratch.generation;
+        out.extend_from_slice(&self.always);
+        for &i in &self.always {
+            scratch.marks[i as usize] = g;
+        }
         let (x0, y0, x1, y1) = self.cell_span(area);
         for y in y0..=y1 {
             for x in x0..=x1 {
                 let c = y * self.nx + x;
-                for &i in &self.items[self.starts[c] as usize..self.starts[c + 1] as usize] {
+                for &i in &self.items[self.starts[c]..self.starts[c + 1]] {
                     if scratch.marks[i as usize] != g {
                         scratch.marks[i as usize] = g;
                         out.push(i);
@@ -134,5 +163,20 @@ mod tests {
         assert_eq!(q(Aabb::new(Vec2::new(4.0, 0.0), Vec2::new(6.0, 6.0))), [0, 1]);
         assert_eq!(q(Aabb::new(Vec2::new(-1.0, -1.0), Vec2::new(0.5, 0.5))), [0, 3]);
         assert_eq!(q(bounds), [0, 1, 2, 3]);
+    }
+
+    #[test]
+    fn huge_worlds_and_obstacles_stay_small() {
+        let bounds = Aabb::new(Vec2::ZERO, Vec2::new(4000.0, 4000.0));
+        let boxes: Vec<Aabb> = (0..100).map(|_| bounds).collect();
+        let grid = Grid::build(bounds, 1.0, &boxes);
+        assert!(grid.items.len() + grid.starts.len() < 100_000, "{}", grid.items.len());
+        let mut out = Vec::new();
+        grid.query(
+            &Aabb::around(Vec2::new(10.0, 10.0), 1.0),
+            &mut GridScratch::default(),
+            &mut out,
+        );
+        assert_eq!(out.len(), 100);
     }
 }

@@ -38,7 +38,7 @@ impl Default for SimConfig {
             laser: LaserConfig::default(),
             depth: DepthConfig::default(),
             reward: RewardConfig::default(),
-            spawn_clearance_m: 0.1,
+            spawn_clearance_m: mdrlat_core::robot::SPAWN_CLEARANCE_M,
         }
     }
 }

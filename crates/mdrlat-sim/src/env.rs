@@ -113,6 +113,14 @@ pub enum SimError {
     /// `step` was called before `reset` or after the episode ended.
     #[error("step() called on an episode that has ended (or never started): call reset() first")]
     NeedsReset,
+    /// A world built in code (not loaded, so not validated) that cannot run.
+    #[error("world '{world}': {problem}")]
+    InvalidWorld {
+        /// World name.
+        world: String,
+        /// What is wrong.
+        problem: String,
+    },
     /// A VecEnv worker thread stopped (it panicked).
     #[error("a VecEnv worker thread stopped unexpectedly")]
     WorkerDied,
@@ -124,6 +132,23 @@ pub enum SimError {
         /// Actions given.
         got: usize,
     },
+}
+
+/// The checks `Env` relies on; loaded worlds always pass them (the loader validates more),
+/// but `World`'s fields are public and a world built in code may not.
+fn check_world(world: &World) -> Result<(), SimError> {
+    let bad = |problem: String| Err(SimError::InvalidWorld { world: world.name.clone(), problem });
+    if world.spawn.iter().all(|r| !(r.area() > 0.0)) {
+        return bad("no spawn region with positive area".into());
+    }
+    for (i, p) in world.pedestrians.iter().enumerate() {
+        if p.waypoints.len() < 2 || !(p.speed > 0.0 && p.radius > 0.0 && p.height > 0.0) {
+            return bad(format!(
+                "pedestrian[{i}] needs 2+ waypoints and positive speed, radius and height"
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// One simulated robot in one world.
@@ -155,6 +180,7 @@ impl Env {
     /// An invalid configuration.
     pub fn new(scene: Arc<StaticScene>, config: SimConfig) -> Result<Self, SimError> {
         config.validate()?;
+        check_world(&scene.world)?;
         Ok(Self {
             laser: Laser::new(&config.laser),
             depth: DepthCamera::new(&config.depth),
@@ -203,9 +229,27 @@ impl Env {
         pose: Option<Pose2>,
     ) -> Result<&Observation, SimError> {
         if let Some(seed) = seed {
-            self.rng = Rng::derive(seed, 0);
-            self.noise_rng = Rng::derive(seed, 1);
+            self.seed_streams(seed, 0);
         }
+        self.start_episode(pose)
+    }
+
+    /// Resets with stream `stream` of `seed`: environment `i` of a `VecEnv` uses stream `i`,
+    /// so runs seeded `s` and `s + 1` share no random numbers. Stream 0 is [`Env::reset`]'s.
+    ///
+    /// # Errors
+    /// No collision-free pose could be drawn.
+    pub fn reset_stream(&mut self, seed: u64, stream: u64) -> Result<&Observation, SimError> {
+        self.seed_streams(seed, stream);
+        self.start_episode(None)
+    }
+
+    fn seed_streams(&mut self, seed: u64, stream: u64) {
+        self.rng = Rng::derive(seed, 2 * stream);
+        self.noise_rng = Rng::derive(seed, 2 * stream + 1);
+    }
+
+    fn start_episode(&mut self, pose: Option<Pose2>) -> Result<&Observation, SimError> {
         self.pedestrians = pedestrians::reset(&self.scene.world.pedestrians, &mut self.rng);
         let pose = match pose {
             Some(p) => p,
@@ -228,14 +272,17 @@ impl Env {
         let clearance = self.config.robot.radius_m + self.config.spawn_clearance_m;
         for _ in 0..SPAWN_ATTEMPTS {
             let mut pick = self.rng.uniform() as f32 * total;
-            let region = world
+            let Some(region) = world
                 .spawn
                 .iter()
                 .find(|r| {
                     pick -= r.area();
                     pick <= 0.0
                 })
-                .unwrap_or(&world.spawn[world.spawn.len() - 1]);
+                .or(world.spawn.last())
+            else {
+                break;
+            };
             let p = Vec2::new(
                 self.rng.range_f32(region.min.x, region.max.x),
                 self.rng.range_f32(region.min.y, region.max.y),

@@ -39,29 +39,30 @@ pub fn reset(specs: &[PedestrianSpec], rng: &mut Rng) -> Vec<PedestrianState> {
         .collect()
 }
 
+/// The waypoint after `target` in the walking direction: around the loop (either way) for
+/// looped paths; ping-pong at the ends otherwise.
 fn next_target(spec: &PedestrianSpec, st: &mut PedestrianState) {
-    let n = spec.waypoints.len();
+    let n = spec.waypoints.len() as i32;
     if spec.looped {
-        st.target = (st.target + 1) % n;
+        st.target = (st.target as i32 + st.direction).rem_euclid(n) as usize;
         return;
     }
     let next = st.target as i32 + st.direction;
-    if next < 0 || next >= n as i32 {
+    if next < 0 || next >= n {
         st.direction = -st.direction;
     }
     st.target = (st.target as i32 + st.direction) as usize;
 }
 
+/// Reverses the walking direction: the new target is the waypoint just passed.
 fn turn_back(spec: &PedestrianSpec, st: &mut PedestrianState) {
-    let n = spec.waypoints.len();
-    if spec.looped {
-        st.target = (st.target + n - 1) % n;
-        // A looped walker turning back keeps walking its loop backwards from here on.
-        st.direction = -st.direction;
+    let n = spec.waypoints.len() as i32;
+    st.direction = -st.direction;
+    st.target = if spec.looped {
+        (st.target as i32 + st.direction).rem_euclid(n) as usize
     } else {
-        st.direction = -st.direction;
-        st.target = (st.target as i32 + st.direction).clamp(0, n as i32 - 1) as usize;
-    }
+        (st.target as i32 + st.direction).clamp(0, n - 1) as usize
+    };
 }
 
 /// Moves every pedestrian by `dt` seconds.
@@ -188,6 +189,50 @@ mod tests {
             advance(&specs, &mut st, 0.2);
         }
         assert_eq!(st[0].direction, -1, "turned back after waiting");
+    }
+
+    #[test]
+    fn a_looped_walker_that_turns_back_walks_its_loop_backwards() {
+        let square = PedestrianSpec {
+            waypoints: vec![
+                Vec2::new(0.0, 0.0),
+                Vec2::new(2.0, 0.0),
+                Vec2::new(2.0, 2.0),
+                Vec2::new(0.0, 2.0),
+            ],
+            speed: 1.0,
+            radius: 0.25,
+            height: 1.7,
+            looped: true,
+            wait_s: 0.2,
+        };
+        let mut blocker = square.clone();
+        blocker.speed = 1e-3;
+        let specs = [square, blocker];
+        let mut st = [
+            PedestrianState {
+                position: Vec2::new(1.0, 0.0),
+                target: 1,
+                direction: 1,
+                waited_s: 0.0,
+            },
+            PedestrianState {
+                position: Vec2::new(1.45, 0.0),
+                target: 0,
+                direction: -1,
+                waited_s: 0.0,
+            },
+        ];
+        for _ in 0..3 {
+            advance(&specs, &mut st, 0.1); // blocked: waits, then turns back
+        }
+        assert_eq!((st[0].direction, st[0].target), (-1, 0));
+        // Walking backwards it passes waypoint 0 and goes on to waypoint 3, not back to 1.
+        for _ in 0..15 {
+            advance(&specs, &mut st, 0.1);
+        }
+        assert_eq!(st[0].target, 3, "{:?}", st[0]);
+        assert!(st[0].position.x.abs() < 1e-4 && st[0].position.y > 0.4, "{:?}", st[0]);
     }
 
     #[test]

@@ -23,7 +23,7 @@ use std::time::{Duration, Instant};
 /// How long a worker spins for the next step before yielding, then parking.
 const SPIN: Duration = Duration::from_micros(300);
 /// How long it then yields before parking.
-const YIELD: Duration = Duration::from_millis(2);
+const YIELD: Duration = Duration::from_micros(500);
 
 /// The outcome of one environment's step in a [`VecEnv`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,7 +46,7 @@ struct Chunk {
     actions: Vec<Action>,
     /// Per environment: the last step's outcome.
     results: Vec<Result<VecStep, SimError>>,
-    /// A reset request: environment `i` is seeded with `seed + first + i`.
+    /// A reset request: environment `first + i` takes stream `first + i` of the seed.
     reset_seed: Option<u64>,
     first: usize,
 }
@@ -56,8 +56,7 @@ impl Chunk {
     fn run(&mut self) {
         if let Some(seed) = self.reset_seed.take() {
             for (i, (env, r)) in self.envs.iter_mut().zip(&mut self.results).enumerate() {
-                let s = seed.wrapping_add((self.first + i) as u64);
-                *r = env.reset(Some(s)).map(|_| placeholder_step());
+                *r = env.reset_stream(seed, (self.first + i) as u64).map(|_| placeholder_step());
             }
             return;
         }
@@ -112,6 +111,8 @@ struct Control {
     /// Workers finished with the current epoch.
     done: AtomicUsize,
     stop: AtomicBool,
+    /// A worker died: every later call fails.
+    dead: AtomicBool,
 }
 
 #[derive(Debug)]
@@ -251,6 +252,9 @@ impl VecEnv {
 
     /// Runs chunk 0 here and the others on their workers; waits for all.
     fn run_all(&mut self) -> Result<(), SimError> {
+        if self.control.dead.load(Ordering::Acquire) {
+            return Err(SimError::WorkerDied);
+        }
         self.control.done.store(0, Ordering::Release);
         self.control.epoch.fetch_add(1, Ordering::AcqRel);
         for w in &self.workers {
@@ -262,6 +266,7 @@ impl VecEnv {
             spins = spins.wrapping_add(1);
             if spins.is_multiple_of(1024) {
                 if self.workers.iter().any(|w| w.handle.is_finished()) {
+                    self.control.dead.store(true, Ordering::Release);
                     return Err(SimError::WorkerDied);
                 }
                 std::thread::yield_now();
@@ -272,7 +277,8 @@ impl VecEnv {
         Ok(())
     }
 
-    /// Resets every environment; environment `i` is seeded with `seed + i`.
+    /// Resets every environment; environment `i` takes random stream `i` of `seed` (see
+    /// [`Env::reset_stream`]), so runs with neighbouring seeds share no random numbers.
     ///
     /// # Errors
     /// An environment found no free start pose.

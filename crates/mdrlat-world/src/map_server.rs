@@ -13,8 +13,8 @@
 //!   [`ImportOptions::unknown_is_occupied`]) merged greedily into few rectangles, each a box
 //!   prism from the floor to [`ImportOptions::wall_height_m`], labelled `wall`;
 //! - spawn regions: the free cells (never unknown ones) farther than
-//!   [`ImportOptions::spawn_clearance_m`] from every wall cell, centre to centre (an exact
-//!   Euclidean distance transform), merged the same way;
+//!   [`ImportOptions::spawn_clearance_m`] (plus half a cell diagonal) from every wall cell,
+//!   centre to centre (an exact Euclidean distance transform), merged the same way;
 //! - bounds: the axis-aligned box around the (rotated) map; no goals, no pedestrians.
 //!
 //! Spawn regions are axis-aligned boxes, so for a map with a non-zero yaw they are computed on
@@ -41,8 +41,10 @@ pub struct ImportOptions {
     pub wall_height_m: f32,
     /// Treat unknown cells as walls (default false: they are neither walls nor spawn space).
     pub unknown_is_occupied: bool,
-    /// Spawn regions hold the free cells whose centre is farther than this from every wall
-    /// cell's centre, metres (default: the robot radius + 0.05).
+    /// Spawn regions hold the free cells whose every point is at least this far from every
+    /// wall cell, metres (default: the robot radius + the reset clearance, as `reset` and
+    /// world validation use). Measured from each spawn cell's centre to the nearest wall
+    /// cell's centre, minus half a cell diagonal: every spawn cell's centre is a valid pose.
     pub spawn_clearance_m: f32,
 }
 
@@ -51,7 +53,7 @@ impl Default for ImportOptions {
         Self {
             wall_height_m: 2.0,
             unknown_is_occupied: false,
-            spawn_clearance_m: mdrlat_core::robot::RADIUS_M + 0.05,
+            spawn_clearance_m: mdrlat_core::robot::RADIUS_M + mdrlat_core::robot::SPAWN_CLEARANCE_M,
         }
     }
 }
@@ -226,7 +228,11 @@ fn build(
     let extent = frame.rect(&CellRect { row: 0, col: 0, rows: grid.height, cols: grid.width });
     let bounds = frame.world_box(extent);
     let obstacles = walls(&src, &grid, &frame, blocked, opts.wall_height_m)?;
-    let spawn = spawn_regions(&src, &grid, &frame, bounds, blocked, opts.spawn_clearance_m)?;
+    // Distances are centre to centre: half a cell diagonal more keeps every spawn cell's
+    // centre clear of the whole wall cell, so each spawn cell holds a valid reset pose.
+    let clearance =
+        opts.spawn_clearance_m + (meta.resolution as f32) * std::f32::consts::FRAC_1_SQRT_2;
+    let spawn = spawn_regions(&src, &grid, &frame, bounds, blocked, clearance)?;
     let file = yaml_path.file_name().map_or(src.clone(), |f| f.to_string_lossy().into_owned());
     Ok(World {
         name: yaml_path.file_stem().map_or(src.clone(), |s| s.to_string_lossy().into_owned()),
@@ -399,8 +405,14 @@ mod tests {
         import_from_parts("maps/tiny.yaml", yaml, image, opts).unwrap_or_else(|e| panic!("{e}"))
     }
 
+    /// The tiny map's cells are 0.5 m: the default clearance (0.277 m plus half a 0.71 m
+    /// diagonal) would leave no spawn cell, so its tests ask for 0.1 m (0.45 m in all).
+    fn coarse() -> ImportOptions {
+        ImportOptions { spawn_clearance_m: 0.1, ..ImportOptions::default() }
+    }
+
     fn tiny(yaml: &str, image: &[u8]) -> World {
-        world(yaml, image, &ImportOptions::default())
+        world(yaml, image, &coarse())
     }
 
     fn err(yaml: &str, image: &[u8], opts: &ImportOptions) -> String {
@@ -504,7 +516,7 @@ mod tests {
         assert!(none.obstacles.is_empty());
         assert_eq!(none.spawn, w.spawn);
         // Unknown as occupied: the unknown cell joins the right wall, split differently.
-        let opts = ImportOptions { unknown_is_occupied: true, ..ImportOptions::default() };
+        let opts = ImportOptions { unknown_is_occupied: true, ..coarse() };
         let walled = world(YAML, &p2(&PIXELS), &opts);
         let expected = [
             WALLS[0],
@@ -518,7 +530,7 @@ mod tests {
         assert!(!walled.is_free(centre(1, 4), 0.1));
         assert_eq!(walled.spawn, w.spawn);
         // Taller walls.
-        let opts = ImportOptions { wall_height_m: 0.3, ..ImportOptions::default() };
+        let opts = ImportOptions { wall_height_m: 0.3, ..coarse() };
         assert!(world(YAML, &p2(&PIXELS), &opts).obstacles.iter().all(|o| o.prism.z_max == 0.3));
     }
 
@@ -640,7 +652,7 @@ mod tests {
     #[test]
     fn bad_input_is_a_specific_error() {
         let image = p2(&PIXELS);
-        let opts = ImportOptions::default();
+        let opts = coarse();
         let cases: [(String, &[u8], &str); 7] = [
             (
                 YAML.replace("resolution: 0.5\n", ""),
@@ -671,21 +683,16 @@ mod tests {
             assert!(e.contains(needle), "'{e}' lacks '{needle}'");
         }
         // No room: every free cell touches a wall once the clearance is 0.6 m (1.2 cells).
-        let tight = ImportOptions { spawn_clearance_m: 0.6, ..ImportOptions::default() };
+        let tight = ImportOptions { spawn_clearance_m: 0.6, ..coarse() };
         let e = err(YAML, &image, &tight);
-        assert!(e.contains("maps/tiny.yaml: free space: no free cell is farther than 0.6 m from every occupied cell (10 free of 30 cells)"), "{e}");
+        assert!(e.contains("maps/tiny.yaml: free space: no free cell is farther than 0.95355344 m from every occupied cell (10 free of 30 cells)"), "{e}");
         let walled = ImportOptions { unknown_is_occupied: true, ..tight };
         assert!(err(YAML, &image, &walled).contains("occupied or unknown cell"));
         let e = err(YAML, &p2(&[0; 30]), &opts);
         assert!(e.contains("no free cell") && e.contains("(0 free of 30 cells)"), "{e}");
-        let e =
-            err(YAML, &image, &ImportOptions { wall_height_m: 0.0, ..ImportOptions::default() });
+        let e = err(YAML, &image, &ImportOptions { wall_height_m: 0.0, ..coarse() });
         assert!(e.contains("options.wall_height_m: must be positive"), "{e}");
-        let e = err(
-            YAML,
-            &image,
-            &ImportOptions { spawn_clearance_m: f32::NAN, ..ImportOptions::default() },
-        );
+        let e = err(YAML, &image, &ImportOptions { spawn_clearance_m: f32::NAN, ..coarse() });
         assert!(e.contains("options.spawn_clearance_m"), "{e}");
         let e = err(&YAML.replace("[-1.0", "[1e30"), &image, &opts);
         assert!(e.contains("not a box in f32 coordinates") || e.contains("wall at row 0"), "{e}");
@@ -701,7 +708,7 @@ mod tests {
             state
         };
         let images = [p2(&PIXELS), p5(&PIXELS), grey_png(&PIXELS)];
-        let opts = ImportOptions::default();
+        let opts = coarse();
         for round in 0..3000 {
             let mut yaml = YAML.as_bytes().to_vec();
             let mut image = images[round % images.len()].clone();

@@ -3,7 +3,9 @@
 use crate::error::WorldError;
 use crate::format::{FORMAT_VERSION, ObstacleSpec, RectSpec, WorldFile};
 use mdrlat_core::robot;
-use mdrlat_geom::{Aabb, ConvexPolygon, Cuboid, Cylinder, Prism, Shape, ShapeError, Vec2};
+use mdrlat_geom::{
+    Aabb, ConvexPolygon, Cuboid, Cylinder, Grid, GridScratch, Prism, Shape, ShapeError, Vec2,
+};
 use std::path::Path;
 
 /// One static obstacle: a prism, and an optional label for pictures ("table top", "wall").
@@ -224,7 +226,7 @@ impl World {
             pedestrians,
             goals,
         };
-        world.check_spawn_free(src, robot::RADIUS_M)?;
+        world.check_spawn_free(src, robot::RADIUS_M + robot::SPAWN_CLEARANCE_M)?;
         Ok(world)
     }
 
@@ -237,28 +239,45 @@ impl World {
         })
     }
 
-    /// Checks every spawn region has at least one collision-free robot position, scanning it
-    /// on a 5 cm lattice.
+    /// Checks every spawn region has at least one position where a disc of `radius` touches
+    /// no obstacle the body can hit, scanning a lattice of at most 201 x 201 points (5 cm
+    /// apart in rooms) against a broadphase grid.
     fn check_spawn_free(&self, src: &str, radius: f32) -> Result<(), WorldError> {
+        let body: Vec<&Prism> = self
+            .obstacles
+            .iter()
+            .map(|o| &o.prism)
+            .filter(|p| p.overlaps_heights(0.0, robot::BODY_HEIGHT_M))
+            .collect();
+        let aabbs: Vec<Aabb> = body.iter().map(|p| p.shape.aabb()).collect();
+        let area = self.spawn.iter().fold(self.bounds, |b, r| b.union(r));
+        let grid = Grid::build(area, 1.0, &aabbs);
+        let (mut scratch, mut near) = (GridScratch::default(), Vec::new());
         for (i, r) in self.spawn.iter().enumerate() {
-            let step = 0.05f32;
-            let nx = ((r.size().x / step) as usize).clamp(1, 2000);
-            let ny = ((r.size().y / step) as usize).clamp(1, 2000);
-            let any_free = (0..=ny).any(|y| {
-                (0..=nx).any(|x| {
+            let size = r.size();
+            let nx = ((size.x / 0.05).ceil() as usize).clamp(1, 200);
+            let ny = ((size.y / 0.05).ceil() as usize).clamp(1, 200);
+            let mut any_free = false;
+            'scan: for y in 0..=ny {
+                for x in 0..=nx {
                     let p = Vec2::new(
-                        r.min.x + r.size().x * x as f32 / nx as f32,
-                        r.min.y + r.size().y * y as f32 / ny as f32,
+                        r.min.x + size.x * x as f32 / nx as f32,
+                        r.min.y + size.y * y as f32 / ny as f32,
                     );
-                    self.is_free(p, radius)
-                })
-            });
+                    grid.query(&Aabb::around(p, radius), &mut scratch, &mut near);
+                    if near.iter().all(|&k| !body[k as usize].shape.overlaps_disc(p, radius)) {
+                        any_free = true;
+                        break 'scan;
+                    }
+                }
+            }
             if !any_free {
                 return Err(WorldError::invalid(
                     src,
                     format!("spawn[{i}]"),
                     format!(
-                        "no free space: a robot of radius {radius} m fits nowhere in [{}, {}]..[{}, {}]",
+                        "no free space: the robot needs a clear disc of radius {radius:.3} m \
+                         (footprint + reset clearance) and it fits nowhere in [{}, {}]..[{}, {}]",
                         r.min.x, r.min.y, r.max.x, r.max.y
                     ),
                 ));

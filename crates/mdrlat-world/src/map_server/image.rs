@@ -44,10 +44,19 @@ pub(super) fn decode(
     result.map_err(|problem| WorldError::Image { path: path.to_path_buf(), problem })
 }
 
+/// Most pixels of a map (the importer's masks and distance transform take ~40 bytes each).
+const MAX_PIXELS: u64 = 1 << 26;
+
 fn check_size(width: u32, height: u32) -> Result<(usize, usize), String> {
     if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
         return Err(format!(
             "image size {width}x{height}: each side must be 1 to {MAX_SIDE} pixels"
+        ));
+    }
+    if u64::from(width) * u64::from(height) > MAX_PIXELS {
+        return Err(format!(
+            "image size {width}x{height}: more than {MAX_PIXELS} pixels (e.g. 1 km x 1 km at 5 cm); \
+             crop or downsample the map"
         ));
     }
     Ok((width as usize, height as usize))
