@@ -138,7 +138,7 @@ pub enum SimError {
 /// but `World`'s fields are public and a world built in code may not.
 fn check_world(world: &World) -> Result<(), SimError> {
     let bad = |problem: String| Err(SimError::InvalidWorld { world: world.name.clone(), problem });
-    if world.spawn.iter().all(|r| !(r.area() > 0.0)) {
+    if !world.spawn.iter().any(|r| r.area() > 0.0) {
         return bad("no spawn region with positive area".into());
     }
     for (i, p) in world.pedestrians.iter().enumerate() {
