@@ -16,6 +16,7 @@
 //! ```
 //! Every convolution uses TensorFlow "SAME" padding and is followed by a ReLU.
 
+mod init;
 mod net;
 mod variant;
 

@@ -65,7 +65,14 @@ impl QNetConfig {
         h
     }
 
-    /// Builds the network with freshly initialised weights on `device`.
+    /// Builds the network on `device` with weights drawn from `seed` (the same on every
+    /// backend and in every thread; see the `init` module).
+    pub fn init_seeded(&self, device: &Device, seed: u64) -> QNet {
+        self.init(device).map(&mut crate::init::SeededInit::new(seed))
+    }
+
+    /// Builds the network with burn's own initialisation on `device` (seeded by the backend,
+    /// process-wide); prefer [`QNetConfig::init_seeded`] for reproducible runs.
     pub fn init(&self, device: &Device) -> QNet {
         let v = self.variant;
         let conv2 = |c: [usize; 2], k: [usize; 2], s: usize| {

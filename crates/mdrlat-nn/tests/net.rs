@@ -99,3 +99,17 @@ fn variants_parse_and_print() {
     let e = "mdrlat2".parse::<Variant>().expect_err("unknown");
     assert!(e.to_string().contains("mdrlat2") && e.to_string().contains("laser-only"));
 }
+
+#[test]
+fn seeded_init_is_reproducible_and_bounded() {
+    let dev = device();
+    let cfg = QNetConfig::new(Variant::LaserOnly);
+    let a = cfg.init_seeded(&dev, 3);
+    let b = cfg.init_seeded(&dev, 3);
+    let c = cfg.init_seeded(&dev, 4);
+    let x = Tensor::<3>::ones([1, 4, 512], &dev);
+    let qa = values(a.forward(Some(x.clone()), None, None).q);
+    assert_eq!(qa, values(b.forward(Some(x.clone()), None, None).q));
+    assert_ne!(qa, values(c.forward(Some(x), None, None).q));
+    assert_eq!(a.num_params(), 1_060_251);
+}

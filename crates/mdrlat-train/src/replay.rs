@@ -7,7 +7,9 @@
 //! are overwritten leave the buffer first (they are the oldest), so the buffer never returns
 //! a stale frame.
 
-use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY, Rng, normalize_depth, normalize_laser};
+use mdrlat_core::{
+    DEPTH_LEN, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY, Rng, normalize_depth, normalize_laser,
+};
 use std::collections::VecDeque;
 
 /// A frame's id: frames are numbered in push order.
@@ -138,12 +140,15 @@ impl ReplayBuffer {
         }
         let s = self.slot(id);
         if self.keep_laser {
-            for (o, &m) in self.laser_mm[s * LASER_BEAMS..(s + 1) * LASER_BEAMS].iter_mut().zip(laser_m) {
+            for (o, &m) in
+                self.laser_mm[s * LASER_BEAMS..(s + 1) * LASER_BEAMS].iter_mut().zip(laser_m)
+            {
                 *o = to_mm(m);
             }
         }
         if self.keep_depth {
-            for (o, &m) in self.depth_mm[s * DEPTH_LEN..(s + 1) * DEPTH_LEN].iter_mut().zip(depth_m) {
+            for (o, &m) in self.depth_mm[s * DEPTH_LEN..(s + 1) * DEPTH_LEN].iter_mut().zip(depth_m)
+            {
                 *o = to_mm(m);
             }
         }
@@ -153,7 +158,8 @@ impl ReplayBuffer {
     /// True if every frame of `t` is still stored.
     fn is_live(&self, t: &Transition) -> bool {
         let oldest_live = self.frames_pushed.saturating_sub(self.frame_slots as u64);
-        t.oldest_frame() >= oldest_live && t.obs.iter().chain(&t.next).all(|&f| f < self.frames_pushed)
+        t.oldest_frame() >= oldest_live
+            && t.obs.iter().chain(&t.next).all(|&f| f < self.frames_pushed)
     }
 
     /// Stores a transition whose frames were pushed with [`ReplayBuffer::push_frame`]; the
@@ -184,17 +190,29 @@ impl ReplayBuffer {
     }
 
     /// Writes the stacks of frames `ids` (oldest first), normalised, into `laser` / `depth`.
-    fn write_stack(&self, ids: &[FrameId; FRAME_STACK], laser: &mut [f32], depth: &mut [f32], scratch: &mut Vec<f32>) {
+    fn write_stack(
+        &self,
+        ids: &[FrameId; FRAME_STACK],
+        laser: &mut [f32],
+        depth: &mut [f32],
+        scratch: &mut Vec<f32>,
+    ) {
         for (k, &id) in ids.iter().enumerate() {
             let s = self.slot(id);
             if self.keep_laser {
                 scratch.clear();
-                scratch.extend(self.laser_mm[s * LASER_BEAMS..(s + 1) * LASER_BEAMS].iter().map(|&mm| to_m(mm)));
+                scratch.extend(
+                    self.laser_mm[s * LASER_BEAMS..(s + 1) * LASER_BEAMS]
+                        .iter()
+                        .map(|&mm| to_m(mm)),
+                );
                 normalize_laser(scratch, &mut laser[k * LASER_BEAMS..(k + 1) * LASER_BEAMS]);
             }
             if self.keep_depth {
                 scratch.clear();
-                scratch.extend(self.depth_mm[s * DEPTH_LEN..(s + 1) * DEPTH_LEN].iter().map(|&mm| to_m(mm)));
+                scratch.extend(
+                    self.depth_mm[s * DEPTH_LEN..(s + 1) * DEPTH_LEN].iter().map(|&mm| to_m(mm)),
+                );
                 normalize_depth(scratch, &mut depth[k * DEPTH_LEN..(k + 1) * DEPTH_LEN]);
             }
         }
@@ -208,7 +226,12 @@ impl ReplayBuffer {
         let lasers = if self.keep_laser { b * ls } else { 0 };
         let depths = if self.keep_depth { b * ds } else { 0 };
         out.size = b;
-        for (v, n) in [(&mut out.laser, lasers), (&mut out.next_laser, lasers), (&mut out.depth, depths), (&mut out.next_depth, depths)] {
+        for (v, n) in [
+            (&mut out.laser, lasers),
+            (&mut out.next_laser, lasers),
+            (&mut out.depth, depths),
+            (&mut out.next_depth, depths),
+        ] {
             v.resize(n, 0.0);
         }
         out.actions.clear();
@@ -218,9 +241,22 @@ impl ReplayBuffer {
         let mut scratch = Vec::with_capacity(DEPTH_LEN);
         for (row, &i) in indices.iter().enumerate() {
             let t = &self.transitions[i];
-            let (lr, dr) = (if self.keep_laser { row * ls..(row + 1) * ls } else { 0..0 }, if self.keep_depth { row * ds..(row + 1) * ds } else { 0..0 });
-            self.write_stack(&t.obs, &mut out.laser[lr.clone()], &mut out.depth[dr.clone()], &mut scratch);
-            self.write_stack(&t.next, &mut out.next_laser[lr], &mut out.next_depth[dr], &mut scratch);
+            let (lr, dr) = (
+                if self.keep_laser { row * ls..(row + 1) * ls } else { 0..0 },
+                if self.keep_depth { row * ds..(row + 1) * ds } else { 0..0 },
+            );
+            self.write_stack(
+                &t.obs,
+                &mut out.laser[lr.clone()],
+                &mut out.depth[dr.clone()],
+                &mut scratch,
+            );
+            self.write_stack(
+                &t.next,
+                &mut out.next_laser[lr],
+                &mut out.next_depth[dr],
+                &mut scratch,
+            );
             out.actions.push(i64::from(t.action));
             out.rewards.push(t.reward);
             out.terminated.push(if t.terminated { 1.0 } else { 0.0 });

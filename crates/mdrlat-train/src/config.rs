@@ -1,0 +1,190 @@
+//! Training settings. Defaults are the paper's (section 3.1, Algorithm 1); every field can be
+//! overridden from the `[train]` section of a config file or the command line.
+
+use mdrlat_nn::Variant;
+use serde::{Deserialize, Serialize};
+
+/// Every hyper-parameter of a training run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Network variant: laser-only, depth-only, multi, multi-at, multi-bf or mdrlat.
+    pub variant: Variant,
+    /// Environment steps of the run (paper: 400,000).
+    pub total_steps: u64,
+    /// Seed of the run: network initialisation, environment, exploration, replay sampling.
+    pub seed: u64,
+    /// Discount factor γ.
+    pub gamma: f32,
+    /// Adam learning rate for the TD and auxiliary losses.
+    pub learning_rate: f64,
+    /// Adam ε (TensorFlow's default, as the authors' code).
+    pub adam_epsilon: f32,
+    /// Transitions per gradient step.
+    pub batch_size: usize,
+    /// Replay buffer capacity in transitions.
+    pub replay_capacity: usize,
+    /// Transitions in the buffer before learning starts.
+    pub learning_starts: u64,
+    /// Environment steps per gradient step (paper: 1).
+    pub train_frequency: u64,
+    /// Steps between hard copies of the online network into the target network.
+    pub target_update_interval: u64,
+    /// ε of ε-greedy at the start.
+    pub epsilon_start: f32,
+    /// ε after the decay.
+    pub epsilon_end: f32,
+    /// Steps over which ε decays linearly.
+    pub epsilon_decay_steps: u64,
+    /// Weight of the auxiliary loss (eq. 12) added to the TD loss (eq. 13).
+    pub aux_loss_weight: f32,
+    /// Steps between greedy evaluations (Fig. 4).
+    pub eval_interval: u64,
+    /// Episodes per evaluation, from fixed start poses.
+    pub eval_episodes: u32,
+    /// Seed of the fixed evaluation start poses (the same for every run and variant).
+    pub eval_seed: u64,
+    /// Steps between checkpoints.
+    pub checkpoint_interval: u64,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            variant: Variant::Mdrlat,
+            total_steps: 400_000,
+            seed: 0,
+            gamma: 0.99,
+            learning_rate: 1e-4,
+            adam_epsilon: 1e-8,
+            batch_size: 32,
+            replay_capacity: 20_000,
+            learning_starts: 1_000,
+            train_frequency: 1,
+            target_update_interval: 1_000,
+            epsilon_start: 0.1,
+            epsilon_end: 0.0001,
+            epsilon_decay_steps: 20_000,
+            aux_loss_weight: 1.0,
+            eval_interval: 5_000,
+            eval_episodes: 5,
+            eval_seed: 1_000_000,
+            checkpoint_interval: 10_000,
+        }
+    }
+}
+
+/// An inconsistent or out-of-range setting.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("train config: {field}: {problem}")]
+pub struct TrainConfigError {
+    /// The field, e.g. `train.batch_size`.
+    pub field: &'static str,
+    /// What is wrong.
+    pub problem: String,
+}
+
+impl TrainConfig {
+    /// Checks every value and their consistency.
+    ///
+    /// # Errors
+    /// The first problem found.
+    pub fn validate(&self) -> Result<(), TrainConfigError> {
+        let err = |field, problem: String| Err(TrainConfigError { field, problem });
+        if !(self.gamma.is_finite() && (0.0..=1.0).contains(&self.gamma)) {
+            return err("train.gamma", format!("must be in [0, 1], got {}", self.gamma));
+        }
+        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
+            return err(
+                "train.learning_rate",
+                format!("must be positive, got {}", self.learning_rate),
+            );
+        }
+        if !(self.adam_epsilon.is_finite() && self.adam_epsilon > 0.0) {
+            return err(
+                "train.adam_epsilon",
+                format!("must be positive, got {}", self.adam_epsilon),
+            );
+        }
+        if self.batch_size == 0 {
+            return err("train.batch_size", "must be at least 1".into());
+        }
+        if self.replay_capacity < self.batch_size {
+            return err(
+                "train.batch_size",
+                format!("{} exceeds the replay capacity {}", self.batch_size, self.replay_capacity),
+            );
+        }
+        if self.learning_starts < self.batch_size as u64 {
+            return err(
+                "train.learning_starts",
+                format!(
+                    "{} is below the batch size {}: the first batch would not fill",
+                    self.learning_starts, self.batch_size
+                ),
+            );
+        }
+        for (field, v) in [
+            ("train.train_frequency", self.train_frequency),
+            ("train.target_update_interval", self.target_update_interval),
+            ("train.eval_interval", self.eval_interval),
+            ("train.checkpoint_interval", self.checkpoint_interval),
+            ("train.total_steps", self.total_steps),
+        ] {
+            if v == 0 {
+                return err(field, "must be at least 1".into());
+            }
+        }
+        for (field, v) in
+            [("train.epsilon_start", self.epsilon_start), ("train.epsilon_end", self.epsilon_end)]
+        {
+            if !(0.0..=1.0).contains(&v) {
+                return err(field, format!("must be in [0, 1], got {v}"));
+            }
+        }
+        if !(self.aux_loss_weight.is_finite() && self.aux_loss_weight >= 0.0) {
+            return err(
+                "train.aux_loss_weight",
+                format!("must be >= 0, got {}", self.aux_loss_weight),
+            );
+        }
+        Ok(())
+    }
+
+    /// ε at environment step `step` (linear decay, then constant).
+    pub fn epsilon(&self, step: u64) -> f32 {
+        if step >= self.epsilon_decay_steps {
+            return self.epsilon_end;
+        }
+        let f = step as f32 / self.epsilon_decay_steps as f32;
+        self.epsilon_start + f * (self.epsilon_end - self.epsilon_start)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn epsilon_decays_linearly_then_stays() {
+        let c = TrainConfig::default();
+        assert_eq!(c.epsilon(0), 0.1);
+        assert!((c.epsilon(10_000) - (0.1 + 0.0001) / 2.0).abs() < 1e-6);
+        assert_eq!(c.epsilon(20_000), 0.0001);
+        assert_eq!(c.epsilon(400_000), 0.0001);
+    }
+
+    #[test]
+    fn inconsistent_configs_are_rejected() {
+        assert!(TrainConfig::default().validate().is_ok());
+        let bad = |c: TrainConfig| c.validate().expect_err("invalid").to_string();
+        let e = bad(TrainConfig { batch_size: 64, replay_capacity: 32, ..Default::default() });
+        assert!(e.contains("train.batch_size") && e.contains("64"), "{e}");
+        let e = bad(TrainConfig { learning_rate: -1e-4, ..Default::default() });
+        assert!(e.contains("train.learning_rate"), "{e}");
+        let e = bad(TrainConfig { gamma: 1.5, ..Default::default() });
+        assert!(e.contains("train.gamma"), "{e}");
+        let e = bad(TrainConfig { learning_starts: 4, ..Default::default() });
+        assert!(e.contains("train.learning_starts"), "{e}");
+    }
+}

@@ -1,0 +1,215 @@
+//! The learning rule: double DQN with a dueling network and the auxiliary velocity task
+//! (paper eqs. 10, 12, 13; Algorithm 1 lines 6–17).
+
+use crate::config::TrainConfig;
+use crate::replay::Batch;
+use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY};
+use mdrlat_nn::burn::module::Module;
+use mdrlat_nn::burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use mdrlat_nn::burn::prelude::*;
+use mdrlat_nn::{QNet, QNetConfig, Variant};
+
+/// Losses of one gradient step.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Losses {
+    /// Paper eq. (13), mean over the batch.
+    pub td: f32,
+    /// Paper eq. (12), mean over the batch (0 without the auxiliary task).
+    pub at: f32,
+    /// Mean Q(s, a) of the batch, for monitoring.
+    pub q_mean: f32,
+}
+
+/// Network inputs of a batch of observations, as flat arrays in the network's layout.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Inputs {
+    /// Rows.
+    pub size: usize,
+    /// `[B, 4, 512]` normalised laser (empty when unused).
+    pub laser: Vec<f32>,
+    /// `[B, 4, 128, 160]` normalised depth (empty when unused).
+    pub depth: Vec<f32>,
+}
+
+/// The online network, its target copy and the optimiser.
+pub struct Learner {
+    variant: Variant,
+    /// Device with autodiff, where the online network trains.
+    train_device: Device,
+    /// The same device without autodiff, for targets and acting.
+    device: Device,
+    online: QNet,
+    target: QNet,
+    optim: ModuleOptimizer,
+    gamma: f32,
+    learning_rate: f64,
+    aux_weight: f32,
+    updates: u64,
+}
+
+impl std::fmt::Debug for Learner {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Learner")
+            .field("variant", &self.variant)
+            .field("updates", &self.updates)
+            .finish()
+    }
+}
+
+fn tensor3(data: &[f32], b: usize, device: &Device) -> Tensor<3> {
+    Tensor::from_data(TensorData::new(data.to_vec(), [b, FRAME_STACK, LASER_BEAMS]), device)
+}
+
+fn tensor4(data: &[f32], b: usize, device: &Device) -> Tensor<4> {
+    Tensor::from_data(
+        TensorData::new(data.to_vec(), [b, FRAME_STACK, DEPTH_ROWS, DEPTH_COLS]),
+        device,
+    )
+}
+
+impl Learner {
+    /// A fresh learner: the network is initialised from `seed` on `device`, the target is a
+    /// copy (Algorithm 1, line 1).
+    pub fn new(config: &TrainConfig, device: &Device) -> Self {
+        let device = device.clone();
+        let train_device = device.clone().autodiff();
+        let online = QNetConfig::new(config.variant).init_seeded(&train_device, config.seed);
+        let target = online.valid();
+        let optim = AdamConfig::new().with_epsilon(config.adam_epsilon).init();
+        Self {
+            variant: config.variant,
+            train_device,
+            device,
+            online,
+            target,
+            optim,
+            gamma: config.gamma,
+            learning_rate: config.learning_rate,
+            aux_weight: config.aux_loss_weight,
+            updates: 0,
+        }
+    }
+
+    /// The variant.
+    pub fn variant(&self) -> Variant {
+        self.variant
+    }
+
+    /// Gradient steps taken.
+    pub fn updates(&self) -> u64 {
+        self.updates
+    }
+
+    fn inputs<const AD: bool>(
+        &self,
+        laser: &[f32],
+        depth: &[f32],
+        b: usize,
+    ) -> (Option<Tensor<3>>, Option<Tensor<4>>) {
+        let dev = if AD { &self.train_device } else { &self.device };
+        (
+            self.variant.uses_laser().then(|| tensor3(laser, b, dev)),
+            self.variant.uses_depth().then(|| tensor4(depth, b, dev)),
+        )
+    }
+
+    /// Q-values of the online network for a batch of observations, `[B][actions]` row-major.
+    pub fn q_values(&self, inputs: &Inputs) -> Vec<f32> {
+        let (l, d) = self.inputs::<false>(&inputs.laser, &inputs.depth, inputs.size);
+        let q = self.online.valid().forward(l, d, None).q;
+        q.into_data().try_to_vec::<f32>().unwrap_or_default()
+    }
+
+    /// The greedy action of each observation (Algorithm 1, line 3, without exploration).
+    pub fn greedy(&self, inputs: &Inputs) -> Vec<usize> {
+        let q = self.q_values(inputs);
+        let actions = q.len() / inputs.size.max(1);
+        q.chunks(actions.max(1))
+            .map(|row| {
+                row.iter()
+                    .enumerate()
+                    .fold(
+                        (0, f32::NEG_INFINITY),
+                        |best, (i, &v)| if v > best.1 { (i, v) } else { best },
+                    )
+                    .0
+            })
+            .collect()
+    }
+
+    /// Algorithm 1, lines 7–11, eq. (10): `y = r + γ (1 − terminated) Q⁻(s', argmax_a' Q(s', a'))`.
+    /// Only `terminated` zeroes the bootstrap: a time-limit truncation bootstraps.
+    ///
+    /// # Shapes
+    /// `[B, 1]`, on the plain device.
+    fn targets(&self, batch: &Batch) -> Tensor<2> {
+        let b = batch.size;
+        let (nl, nd) = self.inputs::<false>(&batch.next_laser, &batch.next_depth, b);
+        let best_next = self.online.valid().forward(nl.clone(), nd.clone(), None).q.argmax(1); // [B, 1]
+        let q_next = self.target.forward(nl, nd, None).q.gather(1, best_next); // [B, 1]
+        let rewards =
+            Tensor::<2>::from_data(TensorData::new(batch.rewards.clone(), [b, 1]), &self.device);
+        let alive: Vec<f32> = batch.terminated.iter().map(|t| 1.0 - t).collect();
+        let alive = Tensor::<2>::from_data(TensorData::new(alive, [b, 1]), &self.device);
+        rewards + alive * q_next * self.gamma
+    }
+
+    /// The TD targets `y` of a batch (eq. 10), for tests and diagnostics.
+    #[doc(alias = "eq10")]
+    pub fn td_targets(&self, batch: &Batch) -> Vec<f32> {
+        self.targets(batch).into_data().try_to_vec::<f32>().unwrap_or_default()
+    }
+
+    /// Q⁻(s', a) of the target network for every action, `[B][actions]` row-major.
+    pub fn target_q_next(&self, batch: &Batch) -> Vec<f32> {
+        let (nl, nd) = self.inputs::<false>(&batch.next_laser, &batch.next_depth, batch.size);
+        self.target.forward(nl, nd, None).q.into_data().try_to_vec::<f32>().unwrap_or_default()
+    }
+
+    /// One gradient step on a sampled batch (Algorithm 1, lines 7–15).
+    pub fn update(&mut self, batch: &Batch) -> Losses {
+        let b = batch.size;
+        let y = Tensor::<2>::from_data(self.targets(batch).into_data(), &self.train_device);
+
+        // Line 12, eq. (13): (y − Q(s, a))².
+        let (l, d) = self.inputs::<true>(&batch.laser, &batch.depth, b);
+        let out = self.online.forward(l, d, None);
+        let actions = Tensor::<2, Int>::from_data(
+            TensorData::new(batch.actions.clone(), [b, 1]),
+            &self.train_device,
+        );
+        let q_sa = out.q.gather(1, actions); // [B, 1]
+        let q_mean = q_sa.clone().mean().into_scalar::<f32>();
+        let td = (y - q_sa).square().mean(); // [1]
+        let td_value = td.clone().into_scalar::<f32>();
+
+        // Lines 13–14, eq. (12): Σ over t−2..t of (v − ṽ)² + (ω − ω̃)².
+        let (loss, at_value) = match out.velocity {
+            Some(v_hat) => {
+                let target = Tensor::<2>::from_data(
+                    TensorData::new(batch.odom.clone(), [b, 2 * ODOM_HISTORY]),
+                    &self.train_device,
+                );
+                let at = (target - v_hat).square().sum_dim(1).mean(); // [1]
+                let at_value = at.clone().into_scalar::<f32>();
+                (td + at * self.aux_weight, at_value)
+            }
+            None => (td, 0.0),
+        };
+        // Line 15: one Adam step on the online network.
+        let grads = GradientsParams::from_grads(loss.backward(), &self.online);
+        self.online = self.optim.step(self.learning_rate, self.online.clone(), grads);
+        self.updates += 1;
+        Losses { td: td_value, at: at_value, q_mean }
+    }
+
+    /// Lines 16–17: θ⁻ ← θ.
+    pub fn sync_target(&mut self) {
+        self.target = self.online.valid();
+    }
+
+    /// The online network without autodiff (for evaluation and export).
+    pub fn policy_net(&self) -> QNet {
+        self.online.valid()
+    }
+}

@@ -1,0 +1,14 @@
+//! Training MDRLAT agents (SPEC §4, paper Algorithm 1).
+//!
+//! The learning rule ([`learner`]), the replay buffer ([`replay`]) and the loop that ties
+//! them to the simulator ([`train`]) are separate rooms, as in Stable-Baselines3.
+
+pub mod config;
+pub mod learner;
+pub mod replay;
+pub mod train;
+
+pub use config::{TrainConfig, TrainConfigError};
+pub use learner::{Inputs, Learner, Losses};
+pub use replay::{Batch, ReplayBuffer, Transition};
+pub use train::{Evaluation, Status, TrainError, TrainReport, evaluate, observation_inputs, train};

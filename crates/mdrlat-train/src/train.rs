@@ -1,0 +1,331 @@
+//! The training loop of paper Algorithm 1, with greedy evaluations (Fig. 4), metrics and the
+//! final weights. It reads top to bottom like the algorithm; `// Algorithm 1, line N` marks
+//! each step.
+
+use crate::config::TrainConfig;
+use crate::learner::{Inputs, Learner, Losses};
+use crate::replay::{Batch, FrameId, ReplayBuffer, Transition};
+use mdrlat_core::{Action, FRAME_STACK, ODOM_HISTORY, Rng, normalize_depth, normalize_laser};
+use mdrlat_nn::Variant;
+use mdrlat_nn::burn::prelude::Device;
+use mdrlat_sim::{Env, Observation, SimConfig, SimError, StaticScene};
+use mdrlat_world::World;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Frame slots beyond the replay capacity (episode starts and stacks in flight).
+const FRAME_RESERVE: usize = 512;
+/// Steps per row of `metrics.csv`.
+const LOG_INTERVAL: u64 = 100;
+
+/// Why training stopped.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TrainError {
+    /// The settings are inconsistent.
+    #[error(transparent)]
+    Config(#[from] crate::config::TrainConfigError),
+    /// The simulator failed.
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// A file could not be written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+}
+
+/// Where training is, for progress bars.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Status {
+    /// Environment steps done.
+    pub step: u64,
+    /// ε now.
+    pub epsilon: f32,
+    /// Losses of the last gradient step.
+    pub losses: Losses,
+    /// Episodes finished.
+    pub episodes: u64,
+    /// Mean accumulated reward of the last evaluation.
+    pub last_eval: Option<f32>,
+}
+
+/// One greedy evaluation (Fig. 4): accumulated reward of episodes from fixed start poses.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Evaluation {
+    /// Environment step of the run when it was taken.
+    pub step: u64,
+    /// Accumulated reward of each episode.
+    pub rewards: Vec<f32>,
+    /// Length of each episode.
+    pub lengths: Vec<u32>,
+}
+
+impl Evaluation {
+    /// Mean accumulated reward.
+    pub fn mean(&self) -> f32 {
+        self.rewards.iter().sum::<f32>() / self.rewards.len().max(1) as f32
+    }
+    /// Population standard deviation of the accumulated reward.
+    pub fn std(&self) -> f32 {
+        let m = self.mean();
+        (self.rewards.iter().map(|r| (r - m) * (r - m)).sum::<f32>()
+            / self.rewards.len().max(1) as f32)
+            .sqrt()
+    }
+}
+
+/// The result of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainReport {
+    /// Environment steps taken.
+    pub steps: u64,
+    /// Gradient steps taken.
+    pub updates: u64,
+    /// Episodes finished.
+    pub episodes: u64,
+    /// Every evaluation, in order.
+    pub evaluations: Vec<Evaluation>,
+    /// Wall time, seconds.
+    pub seconds: f64,
+}
+
+/// Writes the network input of `obs` for `variant` into `inputs` (one row), through the
+/// shared normalisation of `mdrlat_core`.
+pub fn observation_inputs(obs: &Observation, variant: Variant, inputs: &mut Inputs) {
+    inputs.size = 1;
+    if variant.uses_laser() {
+        inputs.laser.resize(FRAME_STACK * obs.laser.frame_len(), 0.0);
+        obs.laser.write_stacked(&mut inputs.laser, normalize_laser);
+    }
+    if variant.uses_depth() {
+        inputs.depth.resize(FRAME_STACK * obs.depth.frame_len(), 0.0);
+        obs.depth.write_stacked(&mut inputs.depth, normalize_depth);
+    }
+}
+
+fn odom_of(obs: &Observation) -> [f32; 2 * ODOM_HISTORY] {
+    let mut o = [0.0; 2 * ODOM_HISTORY];
+    for (k, v) in obs.odom.iter().enumerate() {
+        o[2 * k] = v.v;
+        o[2 * k + 1] = v.w;
+    }
+    o
+}
+
+/// A CSV file with a header, named in errors.
+struct Csv {
+    path: PathBuf,
+    out: BufWriter<File>,
+}
+
+impl Csv {
+    fn create(path: PathBuf, header: &str) -> Result<Self, TrainError> {
+        let file =
+            File::create(&path).map_err(|source| TrainError::Io { path: path.clone(), source })?;
+        let mut csv = Csv { path, out: BufWriter::new(file) };
+        csv.line(header)?;
+        Ok(csv)
+    }
+    fn line(&mut self, text: &str) -> Result<(), TrainError> {
+        writeln!(self.out, "{text}")
+            .map_err(|source| TrainError::Io { path: self.path.clone(), source })
+    }
+    fn flush(&mut self) -> Result<(), TrainError> {
+        self.out.flush().map_err(|source| TrainError::Io { path: self.path.clone(), source })
+    }
+}
+
+/// Greedy episodes from the fixed start poses `eval_seed + k` (the same for every run).
+///
+/// # Errors
+/// The simulator failed to reset.
+pub fn evaluate(
+    env: &mut Env,
+    learner: &Learner,
+    config: &TrainConfig,
+    step: u64,
+) -> Result<Evaluation, SimError> {
+    let mut eval = Evaluation { step, rewards: Vec::new(), lengths: Vec::new() };
+    let mut inputs = Inputs::default();
+    for k in 0..u64::from(config.eval_episodes) {
+        env.reset(Some(config.eval_seed + k))?;
+        let (mut total, mut length) = (0.0f32, 0u32);
+        loop {
+            observation_inputs(env.observation(), config.variant, &mut inputs);
+            let a = learner.greedy(&inputs)[0];
+            let s =
+                env.step(Action::new(a).unwrap_or_else(|| unreachable!("network has 10 outputs")))?;
+            total += s.reward;
+            length += 1;
+            if s.terminated || s.truncated {
+                break;
+            }
+        }
+        eval.rewards.push(total);
+        eval.lengths.push(length);
+    }
+    Ok(eval)
+}
+
+/// Trains `config.variant` in `world` for `config.total_steps` steps on `device`, writing
+/// `metrics.csv` and `eval.csv` into `dir` (which must exist); `progress` is called after
+/// every step.
+///
+/// # Errors
+/// Invalid settings, a simulator failure, or a file that cannot be written.
+pub fn train(
+    world: World,
+    sim: &SimConfig,
+    config: &TrainConfig,
+    device: &Device,
+    dir: &Path,
+    mut progress: impl FnMut(&Status),
+) -> Result<(TrainReport, Learner), TrainError> {
+    config.validate()?;
+    let started = Instant::now();
+    let scene = Arc::new(StaticScene::new(Arc::new(world), sim));
+    let mut env = Env::new(scene.clone(), sim.clone())?;
+    let mut eval_env = Env::new(scene, sim.clone())?;
+    // Seeding in one block: network init (inside Learner::new), environment, exploration,
+    // replay sampling — each its own stream of the run's seed.
+    let mut explore_rng = Rng::derive(config.seed, 101);
+    let mut sample_rng = Rng::derive(config.seed, 102);
+    env.reset_stream(config.seed, 0)?;
+
+    // Algorithm 1, line 1: replay buffer D, online network θ, target θ⁻ = θ.
+    let variant = config.variant;
+    let mut replay = ReplayBuffer::new(
+        config.replay_capacity,
+        FRAME_RESERVE,
+        variant.uses_laser(),
+        variant.uses_depth(),
+    );
+    let mut learner = Learner::new(config, device);
+
+    let mut metrics = Csv::create(
+        dir.join("metrics.csv"),
+        "step,loss_td,loss_at,q_mean,epsilon,episode_reward,episode_length,episodes",
+    )?;
+    let mut evals_csv = Csv::create(
+        dir.join("eval.csv"),
+        "step,eval_reward_mean,eval_reward_std,eval_length_mean",
+    )?;
+
+    let push_latest = |replay: &mut ReplayBuffer, obs: &Observation| {
+        replay.push_frame(obs.laser.latest(), obs.depth.latest())
+    };
+    let first = push_latest(&mut replay, env.observation());
+    let mut stack: [FrameId; FRAME_STACK] = [first; FRAME_STACK];
+    let mut inputs = Inputs::default();
+    let mut batch = Batch::default();
+    let mut status = Status::default();
+    let (mut ep_reward, mut ep_len) = (0.0f32, 0u32);
+    let (mut win_td, mut win_at, mut win_q, mut win_updates) = (0.0f64, 0.0f64, 0.0f64, 0u32);
+    let (mut win_ep_reward, mut win_ep_len, mut win_eps) = (0.0f64, 0.0f64, 0u32);
+    let mut report =
+        TrainReport { steps: 0, updates: 0, episodes: 0, evaluations: Vec::new(), seconds: 0.0 };
+
+    // Algorithm 1, line 2.
+    for t in 1..=config.total_steps {
+        // Line 3: ε-greedy on s_k.
+        let epsilon = config.epsilon(t - 1);
+        let action = if explore_rng.uniform() < f64::from(epsilon) {
+            explore_rng.below(Action::COUNT)
+        } else {
+            observation_inputs(env.observation(), variant, &mut inputs);
+            learner.greedy(&inputs)[0]
+        };
+        let odom = odom_of(env.observation());
+        // Line 4: execute a_k, observe r_k and s_{k+1}.
+        let s =
+            env.step(Action::new(action).unwrap_or_else(|| unreachable!("action index < 10")))?;
+        let (reward, terminated, done) = (s.reward, s.terminated, s.terminated || s.truncated);
+        // Line 5: store (s_k, a_k, r_k, s_{k+1}); s_{k+1} is the true final observation at an
+        // episode's end, and only a collision (terminated) marks it terminal.
+        let newest = push_latest(&mut replay, s.observation);
+        let next = [stack[1], stack[2], stack[3], newest];
+        replay.push(Transition {
+            obs: stack,
+            next,
+            action: action as u8,
+            reward,
+            terminated,
+            odom,
+        });
+        ep_reward += reward;
+        ep_len += 1;
+        if done {
+            win_ep_reward += f64::from(ep_reward);
+            win_ep_len += f64::from(ep_len);
+            win_eps += 1;
+            report.episodes += 1;
+            (ep_reward, ep_len) = (0.0, 0);
+            env.reset(None)?;
+            let first = push_latest(&mut replay, env.observation());
+            stack = [first; FRAME_STACK];
+        } else {
+            stack = next;
+        }
+
+        // Lines 6–15: one gradient step on a random batch.
+        if replay.len() as u64 >= config.learning_starts && t % config.train_frequency == 0 {
+            let idx = replay.sample_indices(config.batch_size, &mut sample_rng);
+            replay.write_batch(&idx, &mut batch);
+            let losses = learner.update(&batch);
+            status.losses = losses;
+            win_td += f64::from(losses.td);
+            win_at += f64::from(losses.at);
+            win_q += f64::from(losses.q_mean);
+            win_updates += 1;
+        }
+        // Lines 16–18: θ⁻ ← θ every N_t steps.
+        if t % config.target_update_interval == 0 {
+            learner.sync_target();
+        }
+
+        if t % LOG_INTERVAL == 0 || t == config.total_steps {
+            let mean = |x: f64, n: u32| {
+                if n > 0 { format!("{:.6}", x / f64::from(n)) } else { String::new() }
+            };
+            let row = format!(
+                "{t},{},{},{},{epsilon:.6},{},{},{}",
+                mean(win_td, win_updates),
+                mean(win_at, win_updates),
+                mean(win_q, win_updates),
+                mean(win_ep_reward, win_eps),
+                mean(win_ep_len, win_eps),
+                report.episodes
+            );
+            metrics.line(&row)?;
+            (win_td, win_at, win_q, win_updates) = (0.0, 0.0, 0.0, 0);
+            (win_ep_reward, win_ep_len, win_eps) = (0.0, 0.0, 0);
+        }
+        if t % config.eval_interval == 0 {
+            let e = evaluate(&mut eval_env, &learner, config, t)?;
+            let mean_len = e.lengths.iter().map(|&l| f64::from(l)).sum::<f64>()
+                / e.lengths.len().max(1) as f64;
+            evals_csv.line(&format!("{t},{:.6},{:.6},{mean_len:.2}", e.mean(), e.std()))?;
+            evals_csv.flush()?;
+            metrics.flush()?;
+            status.last_eval = Some(e.mean());
+            report.evaluations.push(e);
+        }
+        status.step = t;
+        status.epsilon = epsilon;
+        status.episodes = report.episodes;
+        progress(&status);
+    }
+    metrics.flush()?;
+    evals_csv.flush()?;
+    report.steps = config.total_steps;
+    report.updates = learner.updates();
+    report.seconds = started.elapsed().as_secs_f64();
+    Ok((report, learner))
+}

@@ -1,0 +1,103 @@
+//! The replay buffer returns exactly what the environment produced (to the millimetre),
+//! across episode boundaries and wrap-around, in well under 1 GiB.
+
+use mdrlat_core::{
+    Action, DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Rng, normalize_depth, normalize_laser,
+};
+use mdrlat_sim::{Env, Observation, SimConfig};
+use mdrlat_train::replay::{Batch, FrameId, ReplayBuffer, Transition};
+
+fn stacked(obs: &Observation) -> (Vec<f32>, Vec<f32>) {
+    let mut l = vec![0.0; FRAME_STACK * LASER_BEAMS];
+    let mut d = vec![0.0; FRAME_STACK * DEPTH_LEN];
+    obs.laser.write_stacked(&mut l, normalize_laser);
+    obs.depth.write_stacked(&mut d, normalize_depth);
+    (l, d)
+}
+
+/// What the env produced for one step: s_t (laser, depth), s_t+1 (laser, depth), a, r,
+/// terminated.
+type Expected = (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, u8, f32, bool);
+
+fn close(a: &[f32], b: &[f32], tol: f32) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol)
+}
+
+#[test]
+fn sampled_transitions_equal_what_the_env_produced() {
+    let world = mdrlat_world::builtin::get("train").expect("builtin").expect("valid");
+    let sim = SimConfig { max_episode_steps: 23, ..SimConfig::default() };
+    let mut env = Env::from_world(world, sim).expect("env");
+    env.reset(Some(3)).expect("reset");
+    // Small buffer: 40 transitions, so 150 steps wrap it several times.
+    let mut buf = ReplayBuffer::new(40, 8, true, true);
+    let first = buf.push_frame(env.observation().laser.latest(), env.observation().depth.latest());
+    let mut stack: [FrameId; 4] = [first; 4];
+    let mut expected: Vec<Expected> = Vec::new();
+    let mut rng = Rng::seed_from_u64(9);
+    let mut episodes = 0;
+    for _ in 0..150 {
+        let (l0, d0) = stacked(env.observation());
+        let a = rng.below(10);
+        let s = env.step(Action::new(a).expect("action")).expect("step");
+        let (l1, d1) = stacked(s.observation);
+        let (reward, terminated, done) = (s.reward, s.terminated, s.terminated || s.truncated);
+        let id = buf.push_frame(s.observation.laser.latest(), s.observation.depth.latest());
+        let next = [stack[1], stack[2], stack[3], id];
+        buf.push(Transition {
+            obs: stack,
+            next,
+            action: a as u8,
+            reward,
+            terminated,
+            odom: [0.0; 6],
+        });
+        expected.push((l0, d0, l1, d1, a as u8, reward, terminated));
+        if done {
+            episodes += 1;
+            env.reset(None).expect("reset");
+            let f =
+                buf.push_frame(env.observation().laser.latest(), env.observation().depth.latest());
+            stack = [f; 4];
+        } else {
+            stack = next;
+        }
+    }
+    assert!(episodes >= 5, "crossed episode boundaries: {episodes}");
+    assert!(buf.len() <= 40 && buf.len() >= 30, "held {}", buf.len());
+    // The buffer holds the most recent transitions, oldest first.
+    let held = &expected[expected.len() - buf.len()..];
+    let mut batch = Batch::default();
+    let all: Vec<usize> = (0..buf.len()).collect();
+    buf.write_batch(&all, &mut batch);
+    let (ls, ds) = (FRAME_STACK * LASER_BEAMS, FRAME_STACK * DEPTH_LEN);
+    // Millimetre storage: 0.5 mm error, i.e. 0.5e-3 / 5.6 laser and 0.5e-3 / 5 depth units.
+    let (tl, td) = (0.6e-3 / 5.6, 0.6e-3 / 5.0);
+    for (row, e) in held.iter().enumerate() {
+        assert!(close(&batch.laser[row * ls..(row + 1) * ls], &e.0, tl), "laser s_t row {row}");
+        assert!(close(&batch.depth[row * ds..(row + 1) * ds], &e.1, td), "depth s_t row {row}");
+        assert!(
+            close(&batch.next_laser[row * ls..(row + 1) * ls], &e.2, tl),
+            "laser s_t+1 row {row}"
+        );
+        assert!(
+            close(&batch.next_depth[row * ds..(row + 1) * ds], &e.3, td),
+            "depth s_t+1 row {row}"
+        );
+        assert_eq!(batch.actions[row], i64::from(e.4));
+        assert_eq!(batch.rewards[row], e.5);
+        assert_eq!(batch.terminated[row] == 1.0, e.6);
+    }
+}
+
+#[test]
+fn twenty_thousand_transitions_fit_well_under_a_gibibyte() {
+    let buf = ReplayBuffer::new(20_000, 512, true, true);
+    let bytes = buf.memory_bytes();
+    // 20,512 frames x (40,960 + 1,024) bytes + the transition records.
+    assert!(bytes < 900 * 1024 * 1024, "{bytes} bytes");
+    let naive = 20_000usize * 2 * FRAME_STACK * (DEPTH_LEN + LASER_BEAMS) * 4;
+    assert!(naive / bytes >= 14, "naive {naive} vs {bytes}");
+    // A laser-only run keeps no depth.
+    assert!(ReplayBuffer::new(20_000, 512, true, false).memory_bytes() < 30 * 1024 * 1024);
+}
