@@ -2,6 +2,7 @@
 
 use anyhow::{Context, Result};
 use mdrlat_sim::SimConfig;
+use mdrlat_train::TrainConfig;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -14,23 +15,68 @@ pub const DEFAULT_TOML: &str = include_str!("../../../configs/default.toml");
 pub struct Config {
     /// The simulator.
     pub sim: SimConfig,
+    /// Training.
+    pub train: TrainConfig,
 }
 
 impl Config {
     /// Reads a config file (missing keys keep their defaults) and validates it.
     pub fn load(path: &Path) -> Result<Config> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read config {}", path.display()))?;
-        let config: Config = toml::from_str(&text)
-            .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
-        config.sim.validate().with_context(|| path.display().to_string())?;
-        Ok(config)
+        Self::resolve(Some(path), &[])
     }
 
     /// The default config, or the one in `path` when given.
     pub fn load_or_default(path: Option<&Path>) -> Result<Config> {
-        path.map_or_else(|| Ok(Config::default()), Config::load)
+        Self::resolve(path, &[])
     }
+
+    /// The config of `path` (or the defaults) with `--set key=value` overrides applied
+    /// (dotted keys, TOML values: `train.gamma=0.95`, `train.variant="laser-only"`), then
+    /// validated.
+    pub fn resolve(path: Option<&Path>, sets: &[String]) -> Result<Config> {
+        let (source, mut tree) = match path {
+            Some(p) => {
+                let text = std::fs::read_to_string(p)
+                    .with_context(|| format!("cannot read config {}", p.display()))?;
+                let tree: toml::Table = toml::from_str(&text).map_err(|e| {
+                    anyhow::anyhow!("{}: {}", p.display(), e.to_string().trim_end())
+                })?;
+                (p.display().to_string(), tree)
+            }
+            None => ("defaults".to_string(), toml::Table::new()),
+        };
+        for set in sets {
+            apply_set(&mut tree, set)?;
+        }
+        let config: Config = tree.try_into().map_err(|e: toml::de::Error| {
+            anyhow::anyhow!("{source}: {}", e.to_string().trim_end())
+        })?;
+        config.sim.validate().with_context(|| source.clone())?;
+        config.train.validate().with_context(|| source.clone())?;
+        Ok(config)
+    }
+}
+
+/// Applies one `dotted.key=value` override to a TOML tree.
+fn apply_set(tree: &mut toml::Table, set: &str) -> Result<()> {
+    let (key, value) = set
+        .split_once('=')
+        .with_context(|| format!("--set '{set}': expected KEY=VALUE, e.g. train.gamma=0.95"))?;
+    let parsed: toml::Table = toml::from_str(&format!("v = {}", value.trim()))
+        .or_else(|_| toml::from_str(&format!("v = \"{}\"", value.trim())))
+        .map_err(|e| anyhow::anyhow!("--set '{set}': bad value: {e}"))?;
+    let value = parsed.get("v").cloned().context("--set: empty value")?;
+    let parts: Vec<&str> = key.trim().split('.').collect();
+    let mut node = tree;
+    for part in &parts[..parts.len() - 1] {
+        let entry =
+            node.entry(part.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        node = entry
+            .as_table_mut()
+            .with_context(|| format!("--set '{set}': '{part}' is not a section"))?;
+    }
+    node.insert(parts[parts.len() - 1].to_string(), value);
+    Ok(())
 }
 
 /// `mdrlat config check FILE`.
@@ -49,6 +95,20 @@ mod tests {
     fn the_commented_default_file_is_the_default() {
         let parsed: Config = toml::from_str(DEFAULT_TOML).expect("default.toml parses");
         assert_eq!(parsed, Config::default(), "configs/default.toml drifted from the code");
+    }
+
+    #[test]
+    fn command_line_sets_override_and_are_checked() {
+        let sets = ["train.gamma=0.9".to_string(), "train.variant=laser-only".to_string()];
+        let c = Config::resolve(None, &sets).expect("valid");
+        assert_eq!(c.train.gamma, 0.9);
+        assert_eq!(c.train.variant, mdrlat_nn::Variant::LaserOnly);
+        let e = Config::resolve(None, &["train.gama=0.9".to_string()]).expect_err("typo");
+        assert!(format!("{e:#}").contains("gama"), "{e:#}");
+        let e = Config::resolve(None, &["train.batch_size=100000".to_string()]).expect_err("batch");
+        assert!(format!("{e:#}").contains("train.batch_size"), "{e:#}");
+        let e = Config::resolve(None, &["train.variant=mdrlat2".to_string()]).expect_err("variant");
+        assert!(format!("{e:#}").contains("mdrlat2"), "{e:#}");
     }
 
     #[test]

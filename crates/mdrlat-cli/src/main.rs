@@ -42,6 +42,9 @@ enum Command {
     Render(cmd::render::Args),
     /// Runs one episode with a scripted policy and writes its trajectory as CSV (and a GIF).
     Rollout(cmd::rollout::Args),
+    /// Trains an agent (paper Algorithm 1) into a run directory: config.toml, metrics.csv,
+    /// eval.csv, model.safetensors.
+    Train(cmd::train::Args),
     /// Measures performance.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -99,6 +102,7 @@ fn main() -> ExitCode {
         Command::Observe(a) => cmd::observe::run(&a),
         Command::Render(a) => cmd::render::run(&a),
         Command::Rollout(a) => cmd::rollout::run(&a),
+        Command::Train(a) => cmd::train::run(&a),
         Command::Bench(BenchCommand::Sim(a)) => cmd::bench::sim(&a),
         Command::Config(ConfigCommand::Default) => {
             out!("{}", config::DEFAULT_TOML.trim_end());

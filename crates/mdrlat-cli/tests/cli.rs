@@ -201,3 +201,63 @@ fn config_default_round_trips_and_bad_configs_are_rejected() {
         &["bad.toml", "speed"],
     );
 }
+
+#[test]
+fn train_writes_a_run_directory_and_never_overwrites_one() {
+    let d = tmp("train");
+    let run = d.join("run");
+    let r = run.to_str().expect("utf8");
+    let args = [
+        "train",
+        "--variant",
+        "laser-only",
+        "--world",
+        "example",
+        "--steps",
+        "120",
+        "--seed",
+        "3",
+        "--out",
+        r,
+        "--set",
+        "train.learning_starts=40",
+        "--set",
+        "train.eval_interval=100",
+        "--set",
+        "train.eval_episodes=1",
+        "--set",
+        "sim.max_episode_steps=30",
+    ];
+    let o = mdrlat(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in ["config.toml", "metrics.csv", "eval.csv", "model.safetensors"] {
+        assert!(run.join(f).is_file(), "missing {f}");
+    }
+    let cfg = std::fs::read_to_string(run.join("config.toml")).expect("config");
+    assert!(
+        cfg.contains("variant = \"laser-only\"") && cfg.contains("learning_starts = 40"),
+        "{cfg}"
+    );
+    let eval = std::fs::read_to_string(run.join("eval.csv")).expect("eval");
+    assert!(
+        eval.starts_with("step,eval_reward_mean,eval_reward_std") && eval.lines().count() == 2,
+        "{eval}"
+    );
+    // The safetensors header names tensors in PyTorch layout.
+    let bytes = std::fs::read(run.join("model.safetensors")).expect("weights");
+    let n = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes")) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).expect("json header");
+    assert_eq!(header["laser.c1.weight"]["shape"], serde_json::json!([16, 4, 5]));
+    assert_eq!(header["value.hidden.weight"]["shape"], serde_json::json!([512, 1024]));
+    assert_eq!(header["__metadata__"]["mdrlat_variant"], "laser-only");
+    // Never overwrite a run.
+    assert_clean_failure(&mdrlat(&args), &["already holds a run"]);
+    assert_clean_failure(&mdrlat(&["train", "--variant", "mdrlat2", "--out", r]), &["mdrlat2"]);
+    let other = d.join("other");
+    let o = other.to_str().expect("utf8");
+    assert_clean_failure(
+        &mdrlat(&["train", "--out", o, "--set", "train.batch_size=0"]),
+        &["train.batch_size"],
+    );
+    assert_clean_failure(&mdrlat(&["train", "--out", o, "--set", "train.lr=0.1"]), &["lr"]);
+}

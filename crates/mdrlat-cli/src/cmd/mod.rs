@@ -5,6 +5,7 @@ pub mod demo;
 pub mod observe;
 pub mod render;
 pub mod rollout;
+pub mod train;
 pub mod worlds;
 
 use anyhow::{Context, Result, bail};
