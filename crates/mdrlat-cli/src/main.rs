@@ -67,6 +67,9 @@ enum WorldCommand {
 enum BenchCommand {
     /// Environment steps per second with full sensors: one env, and a VecEnv on all cores.
     Sim(cmd::bench::SimArgs),
+    /// Gradient-step time (batch 32) per variant, single-decision inference latency and
+    /// replay memory.
+    Train(cmd::bench_train::TrainArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -104,6 +107,7 @@ fn main() -> ExitCode {
         Command::Rollout(a) => cmd::rollout::run(&a),
         Command::Train(a) => cmd::train::run(&a),
         Command::Bench(BenchCommand::Sim(a)) => cmd::bench::sim(&a),
+        Command::Bench(BenchCommand::Train(a)) => cmd::bench_train::run(&a),
         Command::Config(ConfigCommand::Default) => {
             out!("{}", config::DEFAULT_TOML.trim_end());
             Ok(())

@@ -1,6 +1,7 @@
 //! The Q-network: two convolutional streams, optional bilinear fusion, a dueling head and an
 //! optional auxiliary velocity head.
 
+use crate::patches::PatchGeometry;
 use crate::variant::Variant;
 use burn::nn::conv::{Conv1d, Conv1dConfig, Conv2d, Conv2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig1d, PaddingConfig2d};
@@ -134,13 +135,33 @@ pub struct DepthStream {
 
 impl DepthStream {
     /// # Shapes
-    /// `[B, 4, 128, 160]` → `[B, 2560]`.
-    fn forward(&self, x: Tensor<4>) -> Tensor<2> {
-        let x = relu(self.c1.forward(x)); // [B, 16, 16, 20]
+    /// `patches: [B, 16, 20, 560]` (see [`depth_patches`]) → `[B, 2560]`.
+    fn forward(&self, patches: Tensor<4>) -> Tensor<2> {
+        let [b, oh, ow, k] = patches.dims();
+        let weight = self.c1.weight.val(); // [16, 4, 10, 14]
+        let filters = weight.dims()[0];
+        let weight = weight.reshape([filters, k]).transpose(); // [560, 16]
+        let x = patches.reshape([b * oh * ow, k]).matmul(weight); // [B·16·20, 16]
+        let x = match &self.c1.bias {
+            Some(bias) => x + bias.val().unsqueeze_dim::<2>(0), // [1, 16]
+            None => x,
+        };
+        let x = relu(x.reshape([b, oh, ow, filters]).permute([0, 3, 1, 2])); // [B, 16, 16, 20]
         let x = relu(self.c2.forward(x)); // [B, 32, 8, 10]
         let x = relu(self.c3.forward(x)); // [B, 32, 8, 10]
         x.flatten(1, 3) // [B, 2560]
     }
+}
+
+/// The depth network input: the first convolution's SAME-padded patches of a batch of
+/// normalised `[B, 4, rows, cols]` depth stacks, as `[B, out_rows, out_cols, 560]`
+/// (`[B, 16, 20, 560]` at 128 x 160). See the `patches` module for why.
+pub fn depth_patches(stacks: &[f32], batch: usize, rows: usize, cols: usize, device: &Device) -> Tensor<4> {
+    let g = PatchGeometry::depth_conv1(rows, cols);
+    let mut buf = Vec::new();
+    g.extract(stacks, batch, &mut buf);
+    let [oh, ow] = g.out();
+    Tensor::from_data(TensorData::new(buf, [batch, oh, ow, g.patch_len()]), device)
 }
 
 /// The laser stream: three 1D convolutions.
@@ -242,8 +263,8 @@ impl QNet {
     /// The representation `h = concat(depth features, fusion, laser features, goal)`.
     ///
     /// # Shapes
-    /// `laser: [B, 4, 512]`, `depth: [B, 4, 128, 160]` (each when the variant reads it),
-    /// `goal: [B, goal_dim]` → `[B, h]`.
+    /// `laser: [B, 4, 512]`, `depth: [B, 16, 20, 560]` patches of `[B, 4, 128, 160]` from
+    /// [`depth_patches`] (each when the variant reads it), `goal: [B, goal_dim]` → `[B, h]`.
     ///
     /// # Panics
     /// If an input the variant needs is missing.
@@ -284,5 +305,36 @@ impl QNet {
         let q = dueling(self.value.forward(h.clone()), self.advantage.forward(h.clone()));
         let velocity = self.velocity.as_ref().map(|head| head.forward(h));
         QOutput { q, velocity }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The patch product is the same convolution burn computes directly (SAME padding).
+    #[test]
+    fn patch_product_equals_the_direct_convolution() {
+        let dev = Device::flex();
+        let net = QNetConfig::new(Variant::DepthOnly).init_seeded(&dev, 5);
+        let stream = net.depth.as_ref().expect("depth stream");
+        let mut rng = mdrlat_core::Rng::seed_from_u64(1);
+        let raw: Vec<f32> = (0..2 * 4 * 128 * 160).map(|_| rng.uniform() as f32).collect();
+        let x = Tensor::<4>::from_data(TensorData::new(raw.clone(), [2, 4, 128, 160]), &dev);
+        let direct = stream.c1.forward(x); // [2, 16, 16, 20]
+        let patches = depth_patches(&raw, 2, 128, 160, &dev);
+        let [b, oh, ow, k] = patches.dims();
+        let w = stream.c1.weight.val().reshape([16, k]).transpose();
+        let bias = stream.c1.bias.as_ref().expect("bias").val().unsqueeze_dim::<2>(0);
+        let product = (patches.reshape([b * oh * ow, k]).matmul(w) + bias)
+            .reshape([b, oh, ow, 16])
+            .permute([0, 3, 1, 2]);
+        let (d, p) = (
+            direct.into_data().try_to_vec::<f32>().expect("f32"),
+            product.into_data().try_to_vec::<f32>().expect("f32"),
+        );
+        assert_eq!(d.len(), p.len());
+        let worst = d.iter().zip(&p).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "max difference {worst}");
     }
 }

@@ -3,6 +3,7 @@
 //! The learning rule ([`learner`]), the replay buffer ([`replay`]) and the loop that ties
 //! them to the simulator ([`train`]) are separate rooms, as in Stable-Baselines3.
 
+pub mod bench;
 pub mod config;
 pub mod export;
 pub mod learner;

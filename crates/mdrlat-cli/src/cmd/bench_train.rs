@@ -1,0 +1,62 @@
+//! `mdrlat bench train`: learner speed per variant, inference latency, replay memory.
+
+use super::bench::cpu_model;
+use super::train::DeviceKind;
+use anyhow::Result;
+use mdrlat_nn::Variant;
+use mdrlat_train::bench::{infer_ms, replay_bytes, update_ms};
+use std::time::Duration;
+
+/// Arguments of `mdrlat bench train`.
+#[derive(Debug, clap::Args)]
+pub struct TrainArgs {
+    /// Variants to measure, comma-separated (default: all six).
+    #[arg(long, value_delimiter = ',')]
+    variants: Vec<Variant>,
+    /// Batch size of the gradient step.
+    #[arg(long, default_value_t = 32)]
+    batch: usize,
+    /// Seconds per measurement.
+    #[arg(long, default_value_t = 3.0)]
+    seconds: f64,
+    /// Compute device.
+    #[arg(long, value_enum, default_value = "cpu")]
+    device: DeviceKind,
+    /// Print one JSON object per line instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `mdrlat bench train`.
+pub fn run(a: &TrainArgs) -> Result<()> {
+    let variants = if a.variants.is_empty() { Variant::ALL.to_vec() } else { a.variants.clone() };
+    let time = Duration::from_secs_f64(a.seconds.max(0.05));
+    let device = a.device.device();
+    let backend = format!("{:?}", a.device).to_lowercase();
+    if !a.json {
+        out!("learner speed on {backend} (cpu: {}, {} threads)", cpu_model(), std::thread::available_parallelism().map_or(1, |n| n.get()));
+        out!("{:<11} {:>16} {:>18} {:>14}", "variant", "train step (ms)", "inference 1 (ms)", "replay (MiB)");
+    }
+    for v in variants {
+        let (train, n_train) = update_ms(v, a.batch, &device, time);
+        let (infer, n_infer) = infer_ms(v, &device, time);
+        let replay = replay_bytes(v, 20_000) as f64 / (1024.0 * 1024.0);
+        if a.json {
+            out!(
+                "{}",
+                serde_json::json!({"bench": "train", "variant": v.name(), "backend": backend, "batch": a.batch,
+                    "ms_per_step": (train * 100.0).round() / 100.0, "samples": n_train})
+            );
+            out!(
+                "{}",
+                serde_json::json!({"bench": "infer", "variant": v.name(), "backend": backend,
+                    "threads": std::thread::available_parallelism().map_or(1, |n| n.get()),
+                    "ms": (infer * 1000.0).round() / 1000.0, "samples": n_infer})
+            );
+            out!("{}", serde_json::json!({"bench": "replay", "variant": v.name(), "capacity": 20_000, "mib": (replay * 10.0).round() / 10.0}));
+        } else {
+            out!("{:<11} {:>16.1} {:>18.2} {:>14.0}", v.name(), train, infer, replay);
+        }
+    }
+    Ok(())
+}

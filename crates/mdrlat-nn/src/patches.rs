@@ -1,0 +1,114 @@
+//! The depth stream's first convolution as a matrix product.
+//!
+//! The first depth layer (16 filters of 4 x 10 x 14, stride 8, SAME padding) dominated the
+//! CPU training step as a direct convolution (~40% of the step on burn-flex). Its input is
+//! data, never a parameter, so its patches ("im2col") can be cut on the host once per
+//! batch; the layer is then one matrix product with the convolution's own weight, which
+//! the backend's GEMM handles well, forward and backward. The weight keeps its
+//! `[16, 4, 10, 14]` convolution layout, so exported weights are a plain `Conv2d`.
+
+/// Geometry of a SAME-padded 2D convolution's patches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PatchGeometry {
+    /// Input channels (stacked frames).
+    pub channels: usize,
+    /// Input rows and columns.
+    pub rows: usize,
+    /// Input columns.
+    pub cols: usize,
+    /// Kernel rows and columns.
+    pub kernel: [usize; 2],
+    /// Stride (both axes).
+    pub stride: usize,
+}
+
+impl PatchGeometry {
+    /// The paper's first depth convolution on `[4, rows, cols]` frames.
+    pub fn depth_conv1(rows: usize, cols: usize) -> Self {
+        Self { channels: 4, rows, cols, kernel: [10, 14], stride: 8 }
+    }
+
+    /// Output rows and columns (TensorFlow SAME: `ceil(in / stride)`).
+    pub fn out(&self) -> [usize; 2] {
+        [self.rows.div_ceil(self.stride), self.cols.div_ceil(self.stride)]
+    }
+
+    /// Patch positions per image (`out_rows · out_cols`).
+    pub fn positions(&self) -> usize {
+        let [r, c] = self.out();
+        r * c
+    }
+
+    /// Values per patch (`channels · kh · kw`), ordered channel, kernel row, kernel column
+    /// like the convolution weight.
+    pub fn patch_len(&self) -> usize {
+        self.channels * self.kernel[0] * self.kernel[1]
+    }
+
+    /// Padding before the first row and column (TensorFlow puts the odd pixel after).
+    fn pad_before(&self) -> [usize; 2] {
+        let [or, oc] = self.out();
+        let total = |out: usize, k: usize, len: usize| ((out - 1) * self.stride + k).saturating_sub(len);
+        [total(or, self.kernel[0], self.rows) / 2, total(oc, self.kernel[1], self.cols) / 2]
+    }
+
+    /// Cuts the patches of `batch` images (`[B, channels, rows, cols]`, row-major) into
+    /// `out` as `[B, positions, patch_len]`; padding reads 0.
+    ///
+    /// # Panics
+    /// If `images` does not hold `batch` images.
+    pub fn extract(&self, images: &[f32], batch: usize, out: &mut Vec<f32>) {
+        let (c, h, w) = (self.channels, self.rows, self.cols);
+        assert_eq!(images.len(), batch * c * h * w, "patch input size");
+        let [or, oc] = self.out();
+        let [kh, kw] = self.kernel;
+        let [pt, pl] = self.pad_before();
+        out.clear();
+        out.resize(batch * self.positions() * self.patch_len(), 0.0);
+        let mut o = 0;
+        for b in 0..batch {
+            for y in 0..or {
+                for x in 0..oc {
+                    for ch in 0..c {
+                        let plane = &images[(b * c + ch) * h * w..(b * c + ch + 1) * h * w];
+                        for ky in 0..kh {
+                            let iy = (y * self.stride + ky) as isize - pt as isize;
+                            let row = (0..h as isize).contains(&iy).then(|| &plane[iy as usize * w..(iy as usize + 1) * w]);
+                            for kx in 0..kw {
+                                let ix = (x * self.stride + kx) as isize - pl as isize;
+                                if let Some(row) = row
+                                    && (0..w as isize).contains(&ix)
+                                {
+                                    out[o] = row[ix as usize];
+                                }
+                                o += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn patches_follow_tensorflow_same_padding() {
+        // 1 channel, 5 x 5, kernel 3 x 3, stride 2: out 3 x 3; total pad 2 → 1 before.
+        let g = PatchGeometry { channels: 1, rows: 5, cols: 5, kernel: [3, 3], stride: 2 };
+        assert_eq!(g.out(), [3, 3]);
+        let img: Vec<f32> = (0..25).map(|v| v as f32).collect();
+        let mut out = Vec::new();
+        g.extract(&img, 1, &mut out);
+        assert_eq!(out.len(), 9 * 9);
+        // Top-left patch: the padding row and column are 0.
+        assert_eq!(&out[0..9], &[0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 5.0, 6.0]);
+        // Centre patch (position 4) is centred on pixel (2, 2) = 12.
+        assert_eq!(&out[4 * 9..5 * 9], &[6.0, 7.0, 8.0, 11.0, 12.0, 13.0, 16.0, 17.0, 18.0]);
+        let paper = PatchGeometry::depth_conv1(128, 160);
+        assert_eq!((paper.out(), paper.patch_len()), ([16, 20], 560));
+    }
+}

@@ -1,0 +1,69 @@
+//! Measuring the learner: gradient-step time per variant, single-decision inference latency
+//! and replay memory.
+
+use crate::config::TrainConfig;
+use crate::learner::{Inputs, Learner};
+use crate::replay::{Batch, ReplayBuffer};
+use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Rng};
+use mdrlat_nn::Variant;
+use mdrlat_nn::burn::prelude::Device;
+use std::time::{Duration, Instant};
+
+/// A random batch in the network's input layout (values in the normalised ranges).
+pub fn random_batch(variant: Variant, size: usize, seed: u64) -> Batch {
+    let mut rng = Rng::seed_from_u64(seed);
+    let mut fill = |n: usize| (0..n).map(|_| rng.uniform() as f32).collect::<Vec<f32>>();
+    let ls = if variant.uses_laser() { size * FRAME_STACK * LASER_BEAMS } else { 0 };
+    let ds = if variant.uses_depth() { size * FRAME_STACK * DEPTH_LEN } else { 0 };
+    Batch {
+        size,
+        laser: fill(ls),
+        depth: fill(ds),
+        next_laser: fill(ls),
+        next_depth: fill(ds),
+        actions: (0..size as i64).map(|i| i % 10).collect(),
+        rewards: fill(size),
+        terminated: (0..size).map(|i| (i % 7 == 0) as u8 as f32).collect(),
+        odom: fill(size * 6),
+    }
+}
+
+/// Median milliseconds of `f` over runs filling at least `min_time` (after one warm-up).
+pub fn median_ms(min_time: Duration, mut f: impl FnMut()) -> (f64, usize) {
+    f();
+    let start = Instant::now();
+    let mut samples = Vec::new();
+    while start.elapsed() < min_time || samples.len() < 3 {
+        let t = Instant::now();
+        f();
+        samples.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    samples.sort_by(f64::total_cmp);
+    (samples[samples.len() / 2], samples.len())
+}
+
+/// Median milliseconds of one gradient step (batch `batch`) of `variant` on `device`.
+pub fn update_ms(variant: Variant, batch: usize, device: &Device, min_time: Duration) -> (f64, usize) {
+    let config = TrainConfig { variant, batch_size: batch, ..TrainConfig::default() };
+    let mut learner = Learner::new(&config, device);
+    let b = random_batch(variant, batch, 1);
+    median_ms(min_time, || {
+        learner.update(&b);
+    })
+}
+
+/// Median milliseconds of one greedy decision (batch 1) of `variant` on `device`.
+pub fn infer_ms(variant: Variant, device: &Device, min_time: Duration) -> (f64, usize) {
+    let config = TrainConfig { variant, ..TrainConfig::default() };
+    let learner = Learner::new(&config, device);
+    let b = random_batch(variant, 1, 2);
+    let inputs = Inputs { size: 1, laser: b.laser, depth: b.depth };
+    median_ms(min_time, || {
+        learner.greedy(&inputs);
+    })
+}
+
+/// Bytes of a full replay buffer of `capacity` transitions for `variant`.
+pub fn replay_bytes(variant: Variant, capacity: usize) -> usize {
+    ReplayBuffer::new(capacity, 512, variant.uses_laser(), variant.uses_depth()).memory_bytes()
+}
