@@ -9,6 +9,12 @@ macro_rules! out {
     };
 }
 
+/// mimalloc instead of glibc malloc: the learner allocates and frees multi-megabyte
+/// tensors every step, which glibc returns to the OS and faults back in (see README,
+/// Performance).
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 mod cmd;
 mod config;
 mod progress;

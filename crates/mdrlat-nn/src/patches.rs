@@ -48,7 +48,8 @@ impl PatchGeometry {
     /// Padding before the first row and column (TensorFlow puts the odd pixel after).
     fn pad_before(&self) -> [usize; 2] {
         let [or, oc] = self.out();
-        let total = |out: usize, k: usize, len: usize| ((out - 1) * self.stride + k).saturating_sub(len);
+        let total =
+            |out: usize, k: usize, len: usize| ((out - 1) * self.stride + k).saturating_sub(len);
         [total(or, self.kernel[0], self.rows) / 2, total(oc, self.kernel[1], self.cols) / 2]
     }
 
@@ -65,26 +66,29 @@ impl PatchGeometry {
         let [pt, pl] = self.pad_before();
         out.clear();
         out.resize(batch * self.positions() * self.patch_len(), 0.0);
+        let (patch, kernel_plane) = (self.patch_len(), kh * kw);
         let mut o = 0;
         for b in 0..batch {
             for y in 0..or {
                 for x in 0..oc {
+                    // Kernel columns that land inside the image: one slice copy per row.
+                    let x0 = (x * self.stride) as isize - pl as isize;
+                    let kx_lo = (-x0).max(0) as usize;
+                    let kx_hi = ((w as isize - x0).max(0) as usize).min(kw);
                     for ch in 0..c {
                         let plane = &images[(b * c + ch) * h * w..(b * c + ch + 1) * h * w];
                         for ky in 0..kh {
                             let iy = (y * self.stride + ky) as isize - pt as isize;
-                            let row = (0..h as isize).contains(&iy).then(|| &plane[iy as usize * w..(iy as usize + 1) * w]);
-                            for kx in 0..kw {
-                                let ix = (x * self.stride + kx) as isize - pl as isize;
-                                if let Some(row) = row
-                                    && (0..w as isize).contains(&ix)
-                                {
-                                    out[o] = row[ix as usize];
-                                }
-                                o += 1;
+                            if !(0..h as isize).contains(&iy) || kx_lo >= kx_hi {
+                                continue;
                             }
+                            let src = iy as usize * w + (x0 + kx_lo as isize) as usize;
+                            let dst = o + ch * kernel_plane + ky * kw + kx_lo;
+                            out[dst..dst + kx_hi - kx_lo]
+                                .copy_from_slice(&plane[src..src + kx_hi - kx_lo]);
                         }
                     }
+                    o += patch;
                 }
             }
         }

@@ -43,7 +43,12 @@ pub fn median_ms(min_time: Duration, mut f: impl FnMut()) -> (f64, usize) {
 }
 
 /// Median milliseconds of one gradient step (batch `batch`) of `variant` on `device`.
-pub fn update_ms(variant: Variant, batch: usize, device: &Device, min_time: Duration) -> (f64, usize) {
+pub fn update_ms(
+    variant: Variant,
+    batch: usize,
+    device: &Device,
+    min_time: Duration,
+) -> (f64, usize) {
     let config = TrainConfig { variant, batch_size: batch, ..TrainConfig::default() };
     let mut learner = Learner::new(&config, device);
     let b = random_batch(variant, batch, 1);

@@ -34,8 +34,18 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let device = a.device.device();
     let backend = format!("{:?}", a.device).to_lowercase();
     if !a.json {
-        out!("learner speed on {backend} (cpu: {}, {} threads)", cpu_model(), std::thread::available_parallelism().map_or(1, |n| n.get()));
-        out!("{:<11} {:>16} {:>18} {:>14}", "variant", "train step (ms)", "inference 1 (ms)", "replay (MiB)");
+        out!(
+            "learner speed on {backend} (cpu: {}, {} threads)",
+            cpu_model(),
+            std::thread::available_parallelism().map_or(1, |n| n.get())
+        );
+        out!(
+            "{:<11} {:>16} {:>18} {:>14}",
+            "variant",
+            "train step (ms)",
+            "inference 1 (ms)",
+            "replay (MiB)"
+        );
     }
     for v in variants {
         let (train, n_train) = update_ms(v, a.batch, &device, time);
@@ -53,7 +63,10 @@ pub fn run(a: &TrainArgs) -> Result<()> {
                     "threads": std::thread::available_parallelism().map_or(1, |n| n.get()),
                     "ms": (infer * 1000.0).round() / 1000.0, "samples": n_infer})
             );
-            out!("{}", serde_json::json!({"bench": "replay", "variant": v.name(), "capacity": 20_000, "mib": (replay * 10.0).round() / 10.0}));
+            out!(
+                "{}",
+                serde_json::json!({"bench": "replay", "variant": v.name(), "capacity": 20_000, "mib": (replay * 10.0).round() / 10.0})
+            );
         } else {
             out!("{:<11} {:>16.1} {:>18.2} {:>14.0}", v.name(), train, infer, replay);
         }
