@@ -227,10 +227,12 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
         "train.eval_episodes=1",
         "--set",
         "sim.max_episode_steps=30",
+        "--set",
+        "train.checkpoint_interval=100",
     ];
     let o = mdrlat(&args);
     assert!(o.status.success(), "{}", stderr(&o));
-    for f in ["config.toml", "metrics.csv", "eval.csv", "model.safetensors"] {
+    for f in ["config.toml", "run.toml", "metrics.csv", "eval.csv", "model.safetensors"] {
         assert!(run.join(f).is_file(), "missing {f}");
     }
     let cfg = std::fs::read_to_string(run.join("config.toml")).expect("config");
@@ -252,6 +254,12 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
     assert_eq!(header["__metadata__"]["mdrlat_variant"], "laser-only");
     // Never overwrite a run.
     assert_clean_failure(&mdrlat(&args), &["already holds a run"]);
+    // Resume extends it from its checkpoint (written every 100 steps here).
+    let o = mdrlat(&["train", "--resume", r, "--steps", "150"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let metrics = std::fs::read_to_string(run.join("metrics.csv")).expect("metrics");
+    assert!(metrics.lines().last().is_some_and(|l| l.starts_with("150,")), "{metrics}");
+    assert_clean_failure(&mdrlat(&["train", "--resume", r, "--variant", "mdrlat"]), &["--variant"]);
     assert_clean_failure(&mdrlat(&["train", "--variant", "mdrlat2", "--out", r]), &["mdrlat2"]);
     let other = d.join("other");
     let o = other.to_str().expect("utf8");

@@ -7,7 +7,9 @@ use crate::reward::{RewardTerms, reward};
 use crate::robot::RobotState;
 use crate::scene::StaticScene;
 use crate::sensors::{DepthCamera, Laser};
-use mdrlat_core::{Action, DEPTH_LEN, FrameStack, LASER_BEAMS, ODOM_HISTORY, Rng, Velocity};
+use mdrlat_core::{
+    Action, DEPTH_LEN, FRAME_STACK, FrameStack, LASER_BEAMS, ODOM_HISTORY, Rng, Velocity,
+};
 use mdrlat_geom::{GridScratch, Pose2, Prism, Vec2};
 use mdrlat_world::World;
 use std::sync::Arc;
@@ -149,6 +151,33 @@ fn check_world(world: &World) -> Result<(), SimError> {
         }
     }
     Ok(())
+}
+
+/// Everything that changes while an environment runs: enough to continue an episode
+/// exactly where it was (for training checkpoints). The world and settings are not part of
+/// it; restore into an environment built from the same ones.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EnvState {
+    /// Robot pose and velocity.
+    pub robot: RobotState,
+    /// Pedestrian states, in world order.
+    pub pedestrians: Vec<PedestrianState>,
+    /// Laser frames, oldest first (4 x 512, metres).
+    pub laser_frames: Vec<f32>,
+    /// Depth frames, oldest first (4 x 128 x 160, metres).
+    pub depth_frames: Vec<f32>,
+    /// Odometry history.
+    pub odom: [Velocity; ODOM_HISTORY],
+    /// Spawn and pedestrian stream.
+    pub rng: Rng,
+    /// Noise stream.
+    pub noise_rng: Rng,
+    /// Steps into the episode.
+    pub steps: u32,
+    /// ω of the previous step.
+    pub w_prev: f32,
+    /// An episode is running.
+    pub running: bool,
 }
 
 /// One simulated robot in one world.
@@ -388,6 +417,66 @@ impl Env {
                 reward_terms: terms,
             },
         })
+    }
+
+    /// The environment's changing state (see [`EnvState`]).
+    pub fn state(&self) -> EnvState {
+        let stacked = |s: &FrameStack| (0..FRAME_STACK).flat_map(|k| s.frame(k).to_vec()).collect();
+        EnvState {
+            robot: self.robot,
+            pedestrians: self.pedestrians.clone(),
+            laser_frames: stacked(&self.obs.laser),
+            depth_frames: stacked(&self.obs.depth),
+            odom: self.obs.odom,
+            rng: self.rng.clone(),
+            noise_rng: self.noise_rng.clone(),
+            steps: self.steps,
+            w_prev: self.w_prev,
+            running: self.running,
+        }
+    }
+
+    /// Continues from a saved state.
+    ///
+    /// # Errors
+    /// The state does not fit this world (pedestrian count) or the frame sizes are wrong.
+    pub fn restore(&mut self, state: &EnvState) -> Result<(), SimError> {
+        let bad = |problem: String| SimError::InvalidWorld {
+            world: self.scene.world.name.clone(),
+            problem,
+        };
+        if state.pedestrians.len() != self.scene.world.pedestrians.len() {
+            return Err(bad(format!(
+                "saved state has {} pedestrians, the world {}",
+                state.pedestrians.len(),
+                self.scene.world.pedestrians.len()
+            )));
+        }
+        let n = self.scene.world.pedestrians.iter().map(|p| p.waypoints.len());
+        if state.pedestrians.iter().zip(n).any(|(p, n)| p.target >= n) {
+            return Err(bad("saved pedestrian state names a waypoint the world lacks".into()));
+        }
+        if state.laser_frames.len() != FRAME_STACK * LASER_BEAMS
+            || state.depth_frames.len() != FRAME_STACK * DEPTH_LEN
+        {
+            return Err(bad("saved frames have the wrong size".into()));
+        }
+        for (stack, frames) in
+            [(&mut self.obs.laser, &state.laser_frames), (&mut self.obs.depth, &state.depth_frames)]
+        {
+            for frame in frames.chunks_exact(stack.frame_len()) {
+                stack.push_slot().copy_from_slice(frame);
+            }
+        }
+        self.robot = state.robot;
+        self.pedestrians = state.pedestrians.clone();
+        self.obs.odom = state.odom;
+        self.rng = state.rng.clone();
+        self.noise_rng = state.noise_rng.clone();
+        self.steps = state.steps;
+        self.w_prev = state.w_prev;
+        self.running = state.running;
+        Ok(())
     }
 
     /// The current observation.

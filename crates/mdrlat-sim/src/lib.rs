@@ -20,7 +20,7 @@ pub mod sensors;
 pub mod vec_env;
 
 pub use config::SimConfig;
-pub use env::{Collision, Env, Observation, SimError, Step, StepInfo};
+pub use env::{Collision, Env, EnvState, Observation, SimError, Step, StepInfo};
 pub use policy::{ConstantPolicy, Policy, RandomPolicy, WanderPolicy};
 pub use scene::StaticScene;
 pub use vec_env::{VecEnv, VecStep};

@@ -10,7 +10,7 @@ use mdrlat_geom::{Cylinder, Prism, Shape, Vec2};
 use mdrlat_world::PedestrianSpec;
 
 /// The moving state of one pedestrian.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PedestrianState {
     /// Centre, world frame.
     pub position: Vec2,

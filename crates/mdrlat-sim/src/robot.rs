@@ -5,7 +5,7 @@ use mdrlat_core::Velocity;
 use mdrlat_geom::Pose2;
 
 /// Pose and true velocity of the robot.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct RobotState {
     /// Pose in the world frame.
     pub pose: Pose2,

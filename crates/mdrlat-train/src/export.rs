@@ -18,6 +18,7 @@ use std::path::Path;
 /// The file cannot be written.
 pub fn save_safetensors(net: &QNet, variant: Variant, path: &Path) -> Result<(), String> {
     let mut store = SafetensorsStore::from_file(path)
+        .overwrite(true)
         .with_to_adapter(BurnToPyTorchAdapter)
         .metadata("mdrlat_variant", variant.name())
         .metadata(

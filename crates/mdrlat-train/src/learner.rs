@@ -7,7 +7,9 @@ use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY
 use mdrlat_nn::burn::module::Module;
 use mdrlat_nn::burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use mdrlat_nn::burn::prelude::*;
+use mdrlat_nn::burn::store::{BurnpackStore, ModuleSnapshot};
 use mdrlat_nn::{QNet, QNetConfig, Variant};
+use std::path::Path;
 
 /// Losses of one gradient step.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -199,6 +201,61 @@ impl Learner {
         self.online = self.optim.step(self.learning_rate, self.online.clone(), grads);
         self.updates += 1;
         Losses { td: td_value, at: at_value, q_mean }
+    }
+
+    /// Saves the online and target weights and the Adam moments into `dir` (burnpack files,
+    /// which keep parameter ids so the optimiser state matches on load).
+    ///
+    /// # Errors
+    /// A file cannot be written.
+    pub fn save(&self, dir: &Path) -> Result<(), String> {
+        let store = |name: &str| {
+            BurnpackStore::from_file(dir.join(name)).overwrite(true).auto_extension(false)
+        };
+        self.online.save_into(&mut store("online.bpk")).map_err(|e| format!("online.bpk: {e}"))?;
+        self.target.save_into(&mut store("target.bpk")).map_err(|e| format!("target.bpk: {e}"))?;
+        self.optim.save(dir.join("optimizer.bpk")).map_err(|e| format!("optimizer.bpk: {e}"))
+    }
+
+    /// A learner restored from [`Learner::save`] files, `updates` gradient steps in.
+    ///
+    /// # Errors
+    /// A missing, truncated or foreign file, or weights of another variant.
+    pub fn load(
+        config: &TrainConfig,
+        device: &Device,
+        dir: &Path,
+        updates: u64,
+    ) -> Result<Self, String> {
+        let mut learner = Learner::new(config, device);
+        let read = |net: &mut QNet, name: &str| -> Result<(), String> {
+            let path = dir.join(name);
+            if !path.is_file() {
+                return Err(format!("{}: missing", path.display()));
+            }
+            let mut store = BurnpackStore::from_file(&path).auto_extension(false);
+            let r = net.load_from(&mut store).map_err(|e| format!("{}: {e}", path.display()))?;
+            if !r.errors.is_empty() || !r.missing.is_empty() || !r.unused.is_empty() {
+                return Err(format!(
+                    "{}: does not fit a {} network ({} errors, {} missing, {} unexpected tensors)",
+                    path.display(),
+                    config.variant,
+                    r.errors.len(),
+                    r.missing.len(),
+                    r.unused.len()
+                ));
+            }
+            Ok(())
+        };
+        read(&mut learner.online, "online.bpk")?;
+        let mut target = QNetConfig::new(config.variant).init(&learner.device);
+        read(&mut target, "target.bpk")?;
+        learner.target = target;
+        let path = dir.join("optimizer.bpk");
+        learner.optim =
+            learner.optim.load(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        learner.updates = updates;
+        Ok(learner)
     }
 
     /// Lines 16–17: θ⁻ ← θ.

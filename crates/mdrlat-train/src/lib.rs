@@ -4,6 +4,7 @@
 //! them to the simulator ([`train`]) are separate rooms, as in Stable-Baselines3.
 
 pub mod bench;
+pub mod checkpoint;
 pub mod config;
 pub mod export;
 pub mod learner;

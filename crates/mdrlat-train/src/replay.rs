@@ -264,3 +264,133 @@ impl ReplayBuffer {
         }
     }
 }
+
+/// Magic and version of the replay file format.
+const REPLAY_MAGIC: &[u8; 8] = b"MDRLRB01";
+
+fn io_err(msg: String) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidData, msg)
+}
+
+impl ReplayBuffer {
+    /// Writes the whole buffer (frames and transitions) in mdrlat's replay format
+    /// (little-endian; see `read_from`).
+    ///
+    /// # Errors
+    /// Any write error.
+    pub fn write_to(&self, mut w: impl std::io::Write) -> std::io::Result<()> {
+        w.write_all(REPLAY_MAGIC)?;
+        for v in [
+            self.capacity as u64,
+            self.frame_slots as u64,
+            self.frames_pushed,
+            self.transitions.len() as u64,
+        ] {
+            w.write_all(&v.to_le_bytes())?;
+        }
+        w.write_all(&[u8::from(self.keep_laser), u8::from(self.keep_depth)])?;
+        let mut bytes = Vec::with_capacity(1 << 20);
+        for chunk in [&self.laser_mm, &self.depth_mm] {
+            for part in chunk.chunks(1 << 19) {
+                bytes.clear();
+                bytes.extend(part.iter().flat_map(|v| v.to_le_bytes()));
+                w.write_all(&bytes)?;
+            }
+        }
+        for t in &self.transitions {
+            bytes.clear();
+            for id in t.obs.iter().chain(&t.next) {
+                bytes.extend_from_slice(&id.to_le_bytes());
+            }
+            bytes.push(t.action);
+            bytes.extend_from_slice(&t.reward.to_le_bytes());
+            bytes.push(u8::from(t.terminated));
+            for o in t.odom {
+                bytes.extend_from_slice(&o.to_le_bytes());
+            }
+            w.write_all(&bytes)?;
+        }
+        Ok(())
+    }
+
+    /// Reads a buffer written by [`ReplayBuffer::write_to`]; it must have the given capacity
+    /// and sensors.
+    ///
+    /// # Errors
+    /// A read error, a truncated or foreign file, or a buffer of another shape.
+    pub fn read_from(
+        mut r: impl std::io::Read,
+        capacity: usize,
+        keep_laser: bool,
+        keep_depth: bool,
+    ) -> std::io::Result<Self> {
+        let mut magic = [0u8; 8];
+        r.read_exact(&mut magic)?;
+        if &magic != REPLAY_MAGIC {
+            return Err(io_err("not an mdrlat replay file (bad magic)".into()));
+        }
+        let mut u64s = [0u64; 4];
+        for v in &mut u64s {
+            let mut b = [0u8; 8];
+            r.read_exact(&mut b)?;
+            *v = u64::from_le_bytes(b);
+        }
+        let [cap, slots, pushed, count] = u64s;
+        let mut flags = [0u8; 2];
+        r.read_exact(&mut flags)?;
+        if cap != capacity as u64 || flags != [u8::from(keep_laser), u8::from(keep_depth)] {
+            return Err(io_err(format!(
+                "replay holds capacity {cap} with sensors {flags:?}, the run needs {capacity} with {:?}",
+                [u8::from(keep_laser), u8::from(keep_depth)]
+            )));
+        }
+        if slots < cap || slots > cap + (1 << 20) || count > cap || pushed < count {
+            return Err(io_err(format!(
+                "inconsistent replay header: {slots} slots, {count} transitions, {pushed} frames"
+            )));
+        }
+        let mut buf = ReplayBuffer::new(capacity, (slots - cap) as usize, keep_laser, keep_depth);
+        if buf.frame_slots as u64 != slots {
+            return Err(io_err("replay frame reserve too small".into()));
+        }
+        buf.frames_pushed = pushed;
+        let mut bytes = vec![0u8; 1 << 20];
+        for chunk in [&mut buf.laser_mm, &mut buf.depth_mm] {
+            for part in chunk.chunks_mut(1 << 19) {
+                let b = &mut bytes[..part.len() * 2];
+                r.read_exact(b)?;
+                for (v, c) in part.iter_mut().zip(b.chunks_exact(2)) {
+                    *v = u16::from_le_bytes([c[0], c[1]]);
+                }
+            }
+        }
+        let rec = 8 * 2 * FRAME_STACK + 1 + 4 + 1 + 4 * 2 * ODOM_HISTORY;
+        let mut b = vec![0u8; rec];
+        for _ in 0..count {
+            r.read_exact(&mut b)?;
+            let id =
+                |k: usize| u64::from_le_bytes(b[8 * k..8 * k + 8].try_into().unwrap_or([0; 8]));
+            let f32_at = |o: usize| f32::from_le_bytes(b[o..o + 4].try_into().unwrap_or([0; 4]));
+            let base = 8 * 2 * FRAME_STACK;
+            let t = Transition {
+                obs: [id(0), id(1), id(2), id(3)],
+                next: [id(4), id(5), id(6), id(7)],
+                action: b[base],
+                reward: f32_at(base + 1),
+                terminated: b[base + 5] == 1,
+                odom: std::array::from_fn(|k| f32_at(base + 6 + 4 * k)),
+            };
+            if !buf.is_live(&t) || t.action as usize >= 10 {
+                return Err(io_err(
+                    "replay transition refers to frames the file does not hold".into(),
+                ));
+            }
+            buf.transitions.push_back(t);
+        }
+        let mut extra = [0u8; 1];
+        if r.read(&mut extra)? != 0 {
+            return Err(io_err("trailing bytes after the replay data".into()));
+        }
+        Ok(buf)
+    }
+}

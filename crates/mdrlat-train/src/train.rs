@@ -2,9 +2,10 @@
 //! final weights. It reads top to bottom like the algorithm; `// Algorithm 1, line N` marks
 //! each step.
 
+use crate::checkpoint::{self, FRAME_RESERVE, Meta, Window};
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner, Losses};
-use crate::replay::{Batch, FrameId, ReplayBuffer, Transition};
+use crate::replay::{Batch, ReplayBuffer, Transition};
 use mdrlat_core::{Action, FRAME_STACK, ODOM_HISTORY, Rng, normalize_depth, normalize_laser};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
@@ -16,8 +17,6 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Frame slots beyond the replay capacity (episode starts and stacks in flight).
-const FRAME_RESERVE: usize = 512;
 /// Steps per row of `metrics.csv`.
 const LOG_INTERVAL: u64 = 100;
 
@@ -31,6 +30,14 @@ pub enum TrainError {
     /// The simulator failed.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// A checkpoint is missing, corrupt or of another run.
+    #[error("{path}: {problem}")]
+    Checkpoint {
+        /// The file or folder.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
     /// A file could not be written.
     #[error("{path}: {source}")]
     Io {
@@ -174,18 +181,38 @@ pub fn evaluate(
     Ok(eval)
 }
 
+/// Keeps the rows of a run's CSV file up to `step` (those a resumed run will not write
+/// again) and opens it for appending.
+fn reopen(path: PathBuf, step: u64) -> Result<Csv, TrainError> {
+    let io = |source| TrainError::Io { path: path.clone(), source };
+    let text = std::fs::read_to_string(&path).map_err(io)?;
+    let mut kept = String::with_capacity(text.len());
+    for (i, line) in text.lines().enumerate() {
+        let row_step = line.split(',').next().and_then(|f| f.parse::<u64>().ok());
+        if i == 0 || row_step.is_some_and(|s| s <= step) {
+            kept.push_str(line);
+            kept.push('\n');
+        }
+    }
+    std::fs::write(&path, kept).map_err(io)?;
+    let file = std::fs::OpenOptions::new().append(true).open(&path).map_err(io)?;
+    Ok(Csv { path, out: BufWriter::new(file) })
+}
+
 /// Trains `config.variant` in `world` for `config.total_steps` steps on `device`, writing
-/// `metrics.csv` and `eval.csv` into `dir` (which must exist); `progress` is called after
-/// every step.
+/// `metrics.csv`, `eval.csv` and checkpoints into `dir` (which must exist); with `resume`,
+/// continues exactly from the checkpoint in `dir`. `progress` is called after every step.
 ///
 /// # Errors
-/// Invalid settings, a simulator failure, or a file that cannot be written.
+/// Invalid settings, a simulator failure, a missing or bad checkpoint, or a file that
+/// cannot be written.
 pub fn train(
     world: World,
     sim: &SimConfig,
     config: &TrainConfig,
     device: &Device,
     dir: &Path,
+    resume: bool,
     mut progress: impl FnMut(&Status),
 ) -> Result<(TrainReport, Learner), TrainError> {
     config.validate()?;
@@ -193,51 +220,69 @@ pub fn train(
     let scene = Arc::new(StaticScene::new(Arc::new(world), sim));
     let mut env = Env::new(scene.clone(), sim.clone())?;
     let mut eval_env = Env::new(scene, sim.clone())?;
-    // Seeding in one block: network init (inside Learner::new), environment, exploration,
-    // replay sampling — each its own stream of the run's seed.
-    let mut explore_rng = Rng::derive(config.seed, 101);
-    let mut sample_rng = Rng::derive(config.seed, 102);
-    env.reset_stream(config.seed, 0)?;
-
-    // Algorithm 1, line 1: replay buffer D, online network θ, target θ⁻ = θ.
     let variant = config.variant;
-    let mut replay = ReplayBuffer::new(
-        config.replay_capacity,
-        FRAME_RESERVE,
-        variant.uses_laser(),
-        variant.uses_depth(),
-    );
-    let mut learner = Learner::new(config, device);
-
-    let mut metrics = Csv::create(
-        dir.join("metrics.csv"),
-        "step,loss_td,loss_at,q_mean,epsilon,episode_reward,episode_length,episodes",
-    )?;
-    let mut evals_csv = Csv::create(
-        dir.join("eval.csv"),
-        "step,eval_reward_mean,eval_reward_std,eval_length_mean",
-    )?;
-
     let push_latest = |replay: &mut ReplayBuffer, obs: &Observation| {
         replay.push_frame(obs.laser.latest(), obs.depth.latest())
     };
-    let first = push_latest(&mut replay, env.observation());
-    let mut stack: [FrameId; FRAME_STACK] = [first; FRAME_STACK];
+
+    // Algorithm 1, line 1: replay buffer D, online network θ, target θ⁻ = θ — or all of it,
+    // with the environment and every random stream, from the checkpoint.
+    let (mut learner, mut replay, mut run, mut metrics, mut evals_csv) = if resume {
+        let (run, learner, replay) = checkpoint::load(dir, config, device)?;
+        env.restore(&run.env)?;
+        let metrics = reopen(dir.join("metrics.csv"), run.step)?;
+        let evals = reopen(dir.join("eval.csv"), run.step)?;
+        (learner, replay, run, metrics, evals)
+    } else {
+        // Seeding in one block: network init (inside Learner::new), environment,
+        // exploration and replay sampling — each its own stream of the run's seed.
+        env.reset_stream(config.seed, 0)?;
+        let mut replay = ReplayBuffer::new(
+            config.replay_capacity,
+            FRAME_RESERVE,
+            variant.uses_laser(),
+            variant.uses_depth(),
+        );
+        let first = push_latest(&mut replay, env.observation());
+        let run = Meta {
+            format: checkpoint::CHECKPOINT_FORMAT,
+            mdrlat_version: env!("CARGO_PKG_VERSION").to_string(),
+            variant,
+            step: 0,
+            updates: 0,
+            episodes: 0,
+            episode_reward: 0.0,
+            episode_length: 0,
+            stack: [first; FRAME_STACK],
+            explore_rng: Rng::derive(config.seed, 101),
+            sample_rng: Rng::derive(config.seed, 102),
+            window: Window::default(),
+            env: env.state(),
+            replay_bytes: 0,
+            replay_checksum: 0,
+        };
+        let metrics = Csv::create(
+            dir.join("metrics.csv"),
+            "step,loss_td,loss_at,q_mean,epsilon,episode_reward,episode_length,episodes",
+        )?;
+        let evals = Csv::create(
+            dir.join("eval.csv"),
+            "step,eval_reward_mean,eval_reward_std,eval_length_mean",
+        )?;
+        (Learner::new(config, device), replay, run, metrics, evals)
+    };
     let mut inputs = Inputs::default();
     let mut batch = Batch::default();
-    let mut status = Status::default();
-    let (mut ep_reward, mut ep_len) = (0.0f32, 0u32);
-    let (mut win_td, mut win_at, mut win_q, mut win_updates) = (0.0f64, 0.0f64, 0.0f64, 0u32);
-    let (mut win_ep_reward, mut win_ep_len, mut win_eps) = (0.0f64, 0.0f64, 0u32);
+    let mut status = Status { step: run.step, episodes: run.episodes, ..Status::default() };
     let mut report =
         TrainReport { steps: 0, updates: 0, episodes: 0, evaluations: Vec::new(), seconds: 0.0 };
 
     // Algorithm 1, line 2.
-    for t in 1..=config.total_steps {
+    for t in run.step + 1..=config.total_steps {
         // Line 3: ε-greedy on s_k.
         let epsilon = config.epsilon(t - 1);
-        let action = if explore_rng.uniform() < f64::from(epsilon) {
-            explore_rng.below(Action::COUNT)
+        let action = if run.explore_rng.uniform() < f64::from(epsilon) {
+            run.explore_rng.below(Action::COUNT)
         } else {
             observation_inputs(env.observation(), variant, &mut inputs);
             learner.greedy(&inputs)[0]
@@ -250,6 +295,7 @@ pub fn train(
         // Line 5: store (s_k, a_k, r_k, s_{k+1}); s_{k+1} is the true final observation at an
         // episode's end, and only a collision (terminated) marks it terminal.
         let newest = push_latest(&mut replay, s.observation);
+        let stack = run.stack;
         let next = [stack[1], stack[2], stack[3], newest];
         replay.push(Transition {
             obs: stack,
@@ -259,31 +305,31 @@ pub fn train(
             terminated,
             odom,
         });
-        ep_reward += reward;
-        ep_len += 1;
+        run.episode_reward += reward;
+        run.episode_length += 1;
         if done {
-            win_ep_reward += f64::from(ep_reward);
-            win_ep_len += f64::from(ep_len);
-            win_eps += 1;
-            report.episodes += 1;
-            (ep_reward, ep_len) = (0.0, 0);
+            run.window.episode_reward += f64::from(run.episode_reward);
+            run.window.episode_length += f64::from(run.episode_length);
+            run.window.episodes += 1;
+            run.episodes += 1;
+            (run.episode_reward, run.episode_length) = (0.0, 0);
             env.reset(None)?;
             let first = push_latest(&mut replay, env.observation());
-            stack = [first; FRAME_STACK];
+            run.stack = [first; FRAME_STACK];
         } else {
-            stack = next;
+            run.stack = next;
         }
 
         // Lines 6–15: one gradient step on a random batch.
         if replay.len() as u64 >= config.learning_starts && t % config.train_frequency == 0 {
-            let idx = replay.sample_indices(config.batch_size, &mut sample_rng);
+            let idx = replay.sample_indices(config.batch_size, &mut run.sample_rng);
             replay.write_batch(&idx, &mut batch);
             let losses = learner.update(&batch);
             status.losses = losses;
-            win_td += f64::from(losses.td);
-            win_at += f64::from(losses.at);
-            win_q += f64::from(losses.q_mean);
-            win_updates += 1;
+            run.window.td += f64::from(losses.td);
+            run.window.at += f64::from(losses.at);
+            run.window.q += f64::from(losses.q_mean);
+            run.window.updates += 1;
         }
         // Lines 16–18: θ⁻ ← θ every N_t steps.
         if t % config.target_update_interval == 0 {
@@ -291,41 +337,47 @@ pub fn train(
         }
 
         if t % LOG_INTERVAL == 0 || t == config.total_steps {
+            let w = run.window;
             let mean = |x: f64, n: u32| {
                 if n > 0 { format!("{:.6}", x / f64::from(n)) } else { String::new() }
             };
-            let row = format!(
+            metrics.line(&format!(
                 "{t},{},{},{},{epsilon:.6},{},{},{}",
-                mean(win_td, win_updates),
-                mean(win_at, win_updates),
-                mean(win_q, win_updates),
-                mean(win_ep_reward, win_eps),
-                mean(win_ep_len, win_eps),
-                report.episodes
-            );
-            metrics.line(&row)?;
-            (win_td, win_at, win_q, win_updates) = (0.0, 0.0, 0.0, 0);
-            (win_ep_reward, win_ep_len, win_eps) = (0.0, 0.0, 0);
+                mean(w.td, w.updates),
+                mean(w.at, w.updates),
+                mean(w.q, w.updates),
+                mean(w.episode_reward, w.episodes),
+                mean(w.episode_length, w.episodes),
+                run.episodes
+            ))?;
+            run.window = Window::default();
         }
         if t % config.eval_interval == 0 {
             let e = evaluate(&mut eval_env, &learner, config, t)?;
             let mean_len = e.lengths.iter().map(|&l| f64::from(l)).sum::<f64>()
                 / e.lengths.len().max(1) as f64;
             evals_csv.line(&format!("{t},{:.6},{:.6},{mean_len:.2}", e.mean(), e.std()))?;
-            evals_csv.flush()?;
-            metrics.flush()?;
             status.last_eval = Some(e.mean());
             report.evaluations.push(e);
         }
+        if t % config.checkpoint_interval == 0 {
+            metrics.flush()?;
+            evals_csv.flush()?;
+            run.step = t;
+            run.updates = learner.updates();
+            run.env = env.state();
+            checkpoint::save(dir, &mut run, &learner, &replay)?;
+        }
         status.step = t;
         status.epsilon = epsilon;
-        status.episodes = report.episodes;
+        status.episodes = run.episodes;
         progress(&status);
     }
     metrics.flush()?;
     evals_csv.flush()?;
     report.steps = config.total_steps;
     report.updates = learner.updates();
+    report.episodes = run.episodes;
     report.seconds = started.elapsed().as_secs_f64();
     Ok((report, learner))
 }

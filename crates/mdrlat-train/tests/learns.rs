@@ -44,7 +44,7 @@ fn a_short_laser_only_run_beats_the_random_policy() {
     let dir = std::env::temp_dir().join(format!("mdrlat-learns-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
     let (report, _) =
-        train(world.clone(), &sim, &config, &Device::flex(), &dir, |_| {}).expect("train");
+        train(world.clone(), &sim, &config, &Device::flex(), &dir, false, |_| {}).expect("train");
     let trained = report.evaluations.last().expect("an evaluation").mean();
 
     // The random policy from the same fixed evaluation start poses.

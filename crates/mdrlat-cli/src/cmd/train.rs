@@ -31,9 +31,10 @@ pub struct Args {
     /// (default: the config's, mdrlat).
     #[arg(long)]
     variant: Option<Variant>,
-    /// World to train in: a built-in name, a .toml world file or a map_server .yaml.
-    #[arg(long, default_value = "train")]
-    world: String,
+    /// World to train in: a built-in name, a .toml world file or a map_server .yaml
+    /// (default: train).
+    #[arg(long)]
+    world: Option<String>,
     /// Environment steps (default: the config's, 400,000).
     #[arg(long)]
     steps: Option<u64>,
@@ -41,17 +42,30 @@ pub struct Args {
     #[arg(long)]
     seed: Option<u64>,
     /// Run directory; must not exist yet (or be empty).
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
+    out: Option<PathBuf>,
+    /// Continue the run in this directory exactly from its last checkpoint (its saved
+    /// config and world; `--steps` may extend it).
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["variant", "world", "seed", "config", "sets", "device"])]
+    resume: Option<PathBuf>,
     /// Configuration file (see `mdrlat config default`).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Override any setting: `--set train.gamma=0.95 --set sim.laser.noise_std_m=0.01`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     sets: Vec<String>,
-    /// Compute device.
-    #[arg(long, value_enum, default_value = "cpu")]
-    device: DeviceKind,
+    /// Compute device (default: cpu).
+    #[arg(long, value_enum)]
+    device: Option<DeviceKind>,
+}
+
+/// What a run directory records about how it was started (`run.toml`).
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RunInfo {
+    world: String,
+    device: String,
+    mdrlat_version: String,
 }
 
 fn check_fresh(dir: &Path) -> Result<()> {
@@ -69,29 +83,60 @@ fn check_fresh(dir: &Path) -> Result<()> {
 
 /// Runs `mdrlat train`.
 pub fn run(a: &Args) -> Result<()> {
-    let mut config = Config::resolve(a.config.as_deref(), &a.sets)?;
-    if let Some(v) = a.variant {
-        config.train.variant = v;
+    let (dir, config, info, resume) = match &a.resume {
+        Some(dir) => {
+            let mut config = Config::load(&dir.join("config.toml"))?;
+            let path = dir.join("run.toml");
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("cannot read {}", path.display()))?;
+            let info: RunInfo =
+                toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            if let Some(s) = a.steps {
+                config.train.total_steps = s;
+            }
+            (dir.clone(), config, info, true)
+        }
+        None => {
+            let dir = a.out.clone().context("--out is required")?;
+            let mut config = Config::resolve(a.config.as_deref(), &a.sets)?;
+            if let Some(v) = a.variant {
+                config.train.variant = v;
+            }
+            if let Some(s) = a.steps {
+                config.train.total_steps = s;
+            }
+            if let Some(s) = a.seed {
+                config.train.seed = s;
+            }
+            config.train.validate()?;
+            let device = a.device.unwrap_or(DeviceKind::Cpu);
+            let info = RunInfo {
+                world: a.world.clone().unwrap_or_else(|| "train".into()),
+                device: format!("{device:?}").to_lowercase(),
+                mdrlat_version: env!("CARGO_PKG_VERSION").to_string(),
+            };
+            (dir, config, info, false)
+        }
+    };
+    let world = load_world(&info.world)?;
+    let device = match info.device.as_str() {
+        "cpu" => DeviceKind::Cpu,
+        other => bail!(
+            "{}: device '{other}' is not available in this build",
+            dir.join("run.toml").display()
+        ),
+    };
+    if !resume {
+        check_fresh(&dir)?;
+        let resolved = toml::to_string(&config).context("serialising the config")?;
+        let path = dir.join("config.toml");
+        let header = "# Resolved configuration of this run: every setting, defaults included.\n\n";
+        std::fs::write(&path, format!("{header}{resolved}"))
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        let path = dir.join("run.toml");
+        std::fs::write(&path, toml::to_string(&info).context("serialising run.toml")?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
     }
-    if let Some(s) = a.steps {
-        config.train.total_steps = s;
-    }
-    if let Some(s) = a.seed {
-        config.train.seed = s;
-    }
-    config.train.validate()?;
-    let world = load_world(&a.world)?;
-    check_fresh(&a.out)?;
-    let resolved = toml::to_string(&config).context("serialising the config")?;
-    let header = format!(
-        "# Resolved configuration of this run (mdrlat {}).\n# world = {:?}, device = {:?}\n\n",
-        env!("CARGO_PKG_VERSION"),
-        a.world,
-        a.device
-    );
-    let path = a.out.join("config.toml");
-    std::fs::write(&path, header + &resolved)
-        .with_context(|| format!("cannot write {}", path.display()))?;
 
     let total = config.train.total_steps;
     let pb = ProgressBar::new(total);
@@ -102,37 +147,44 @@ pub fn run(a: &Args) -> Result<()> {
         .unwrap_or_else(|_| ProgressStyle::default_bar())
         .progress_chars("=> "),
     );
-    let device = a.device.device();
-    let (report, learner) =
-        mdrlat_train::train(world, &config.sim, &config.train, &device, &a.out, |s| {
-            if s.step % 50 == 0 || s.step == total {
-                pb.set_position(s.step);
-                let eval = s.last_eval.map(|e| format!(" eval {e:.1}")).unwrap_or_default();
-                pb.set_message(format!(
-                    "eps {:.4} td {:.4} at {:.4} ep {}{eval}",
-                    s.epsilon, s.losses.td, s.losses.at, s.episodes
-                ));
-            }
-        })?;
+    let on_step = |s: &mdrlat_train::Status| {
+        if s.step.is_multiple_of(50) || s.step == total {
+            pb.set_position(s.step);
+            let eval = s.last_eval.map(|e| format!(" eval {e:.1}")).unwrap_or_default();
+            pb.set_message(format!(
+                "eps {:.4} td {:.4} at {:.4} ep {}{eval}",
+                s.epsilon, s.losses.td, s.losses.at, s.episodes
+            ));
+        }
+    };
+    let (report, learner) = mdrlat_train::train(
+        world,
+        &config.sim,
+        &config.train,
+        &device.device(),
+        &dir,
+        resume,
+        on_step,
+    )?;
     pb.finish_and_clear();
-    let weights = a.out.join("model.safetensors");
+    let weights = dir.join("model.safetensors");
     mdrlat_train::export::save_safetensors(&learner.policy_net(), config.train.variant, &weights)
         .map_err(anyhow::Error::msg)?;
     let last = report.evaluations.last().map(|e| format!("{:.2} ± {:.2}", e.mean(), e.std()));
     out!(
-        "{} in '{}': {} steps, {} updates, {} episodes in {:.0} s ({:.1} steps/s); last eval {}",
+        "{} in '{}': step {} of {}, {} updates, {} episodes, {:.0} s this session; last eval {}",
         config.train.variant,
-        a.world,
+        info.world,
         report.steps,
+        total,
         report.updates,
         report.episodes,
         report.seconds,
-        report.steps as f64 / report.seconds.max(1e-9),
-        last.unwrap_or_else(|| "none (fewer steps than train.eval_interval)".into())
+        last.unwrap_or_else(|| "none this session".into())
     );
     out!(
-        "wrote {0}/config.toml, {0}/metrics.csv, {0}/eval.csv, {0}/model.safetensors",
-        a.out.display()
+        "wrote {0}/config.toml, run.toml, metrics.csv, eval.csv, checkpoint/, model.safetensors",
+        dir.display()
     );
     Ok(())
 }

@@ -1,0 +1,226 @@
+//! Checkpoints that resume a run exactly: weights, target, Adam moments, counters, the
+//! replay buffer, the environment's state and every random stream.
+//!
+//! A checkpoint is the folder `checkpoint/` of a run directory:
+//! `meta.json` (format version, variant, counters, RNG and environment state, the replay
+//! file's length and checksum), `online.bpk`, `target.bpk`, `optimizer.bpk` (burnpack) and
+//! `replay.bin`. It is written to `checkpoint.tmp/` and then swapped in, so a run killed
+//! at any moment (even `kill -9`) keeps its previous checkpoint and loses at most one
+//! checkpoint interval. The replay buffer is saved in full (0.8 GB for depth variants):
+//! without it a resumed run would relearn from an empty buffer and diverge from the
+//! uninterrupted one.
+
+use crate::config::TrainConfig;
+use crate::learner::Learner;
+use crate::replay::{FrameId, ReplayBuffer};
+use crate::train::TrainError;
+use mdrlat_core::Rng;
+use mdrlat_nn::Variant;
+use mdrlat_nn::burn::prelude::Device;
+use mdrlat_sim::EnvState;
+use serde::{Deserialize, Serialize};
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+/// Version of the checkpoint format this build reads and writes.
+pub const CHECKPOINT_FORMAT: u32 = 1;
+
+/// Frame slots the training loop reserves beyond the replay capacity.
+pub(crate) const FRAME_RESERVE: usize = 512;
+
+/// Running sums of the current `metrics.csv` window.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Window {
+    /// Sum of TD losses.
+    pub td: f64,
+    /// Sum of auxiliary losses.
+    pub at: f64,
+    /// Sum of mean Q.
+    pub q: f64,
+    /// Gradient steps in the window.
+    pub updates: u32,
+    /// Sum of finished episodes' rewards.
+    pub episode_reward: f64,
+    /// Sum of finished episodes' lengths.
+    pub episode_length: f64,
+    /// Episodes finished in the window.
+    pub episodes: u32,
+}
+
+/// Everything of a run that is not weights or replay.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Meta {
+    /// [`CHECKPOINT_FORMAT`].
+    pub format: u32,
+    /// The mdrlat version that wrote it.
+    pub mdrlat_version: String,
+    /// Network variant.
+    pub variant: Variant,
+    /// Environment steps done.
+    pub step: u64,
+    /// Gradient steps done.
+    pub updates: u64,
+    /// Episodes finished.
+    pub episodes: u64,
+    /// Reward so far of the running episode.
+    pub episode_reward: f32,
+    /// Length so far of the running episode.
+    pub episode_length: u32,
+    /// Replay frame ids of the current observation's stack.
+    pub stack: [FrameId; 4],
+    /// Exploration stream.
+    pub explore_rng: Rng,
+    /// Replay sampling stream.
+    pub sample_rng: Rng,
+    /// The open metrics window.
+    pub window: Window,
+    /// The training environment.
+    pub env: EnvState,
+    /// Bytes of `replay.bin`.
+    pub replay_bytes: u64,
+    /// FNV-1a 64 of `replay.bin`.
+    pub replay_checksum: u64,
+}
+
+/// FNV-1a over everything that passes through.
+struct Hashing<T> {
+    inner: T,
+    hash: u64,
+    bytes: u64,
+}
+
+impl<T> Hashing<T> {
+    fn new(inner: T) -> Self {
+        Self { inner, hash: 0xcbf2_9ce4_8422_2325, bytes: 0 }
+    }
+    fn feed(&mut self, data: &[u8]) {
+        for &b in data {
+            self.hash = (self.hash ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
+        }
+        self.bytes += data.len() as u64;
+    }
+}
+
+impl<W: Write> Write for Hashing<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.feed(&buf[..n]);
+        Ok(n)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+impl<R: Read> Read for Hashing<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.feed(&buf[..n]);
+        Ok(n)
+    }
+}
+
+fn bad(path: &Path, problem: impl Into<String>) -> TrainError {
+    TrainError::Checkpoint { path: path.to_path_buf(), problem: problem.into() }
+}
+
+/// The checkpoint folder of a run directory.
+pub fn folder(run_dir: &Path) -> PathBuf {
+    run_dir.join("checkpoint")
+}
+
+/// Writes a checkpoint of the run in `run_dir` (atomically replacing the previous one).
+///
+/// # Errors
+/// A file cannot be written.
+pub fn save(
+    run_dir: &Path,
+    meta: &mut Meta,
+    learner: &Learner,
+    replay: &ReplayBuffer,
+) -> Result<(), TrainError> {
+    let tmp = run_dir.join("checkpoint.tmp");
+    let _ = std::fs::remove_dir_all(&tmp);
+    std::fs::create_dir_all(&tmp).map_err(|e| bad(&tmp, e.to_string()))?;
+    learner.save(&tmp).map_err(|e| bad(&tmp, e))?;
+    let replay_path = tmp.join("replay.bin");
+    let file = File::create(&replay_path).map_err(|e| bad(&replay_path, e.to_string()))?;
+    let mut w = Hashing::new(BufWriter::with_capacity(1 << 20, file));
+    replay
+        .write_to(&mut w)
+        .and_then(|()| w.flush())
+        .map_err(|e| bad(&replay_path, e.to_string()))?;
+    meta.replay_bytes = w.bytes;
+    meta.replay_checksum = w.hash;
+    let meta_path = tmp.join("meta.json");
+    let text = serde_json::to_string(meta).map_err(|e| bad(&meta_path, e.to_string()))?;
+    std::fs::write(&meta_path, text).map_err(|e| bad(&meta_path, e.to_string()))?;
+    // Swap: the old checkpoint stays valid until the new one is complete.
+    let dest = folder(run_dir);
+    let old = run_dir.join("checkpoint.old");
+    let _ = std::fs::remove_dir_all(&old);
+    if dest.exists() {
+        std::fs::rename(&dest, &old).map_err(|e| bad(&dest, e.to_string()))?;
+    }
+    std::fs::rename(&tmp, &dest).map_err(|e| bad(&dest, e.to_string()))?;
+    let _ = std::fs::remove_dir_all(&old);
+    Ok(())
+}
+
+/// Reads the checkpoint of `run_dir` for a run with `config`.
+///
+/// # Errors
+/// No checkpoint, a truncated or corrupt file, another format version, or a checkpoint of
+/// another variant or replay size.
+pub fn load(
+    run_dir: &Path,
+    config: &TrainConfig,
+    device: &Device,
+) -> Result<(Meta, Learner, ReplayBuffer), TrainError> {
+    let mut dir = folder(run_dir);
+    if !dir.is_dir() && run_dir.join("checkpoint.old").is_dir() {
+        dir = run_dir.join("checkpoint.old"); // killed in the middle of a swap
+    }
+    if !dir.is_dir() {
+        return Err(bad(&dir, "no checkpoint to resume from (none was written yet?)"));
+    }
+    let meta_path = dir.join("meta.json");
+    let text = std::fs::read_to_string(&meta_path).map_err(|e| bad(&meta_path, e.to_string()))?;
+    let meta: Meta =
+        serde_json::from_str(&text).map_err(|e| bad(&meta_path, format!("corrupt: {e}")))?;
+    if meta.format != CHECKPOINT_FORMAT {
+        return Err(bad(
+            &meta_path,
+            format!("format {} (this build reads {CHECKPOINT_FORMAT})", meta.format),
+        ));
+    }
+    if meta.variant != config.variant {
+        return Err(bad(
+            &meta_path,
+            format!(
+                "the checkpoint is a {} network; the run asks for {}",
+                meta.variant, config.variant
+            ),
+        ));
+    }
+    let learner = Learner::load(config, device, &dir, meta.updates).map_err(|e| bad(&dir, e))?;
+    let replay_path = dir.join("replay.bin");
+    let file = File::open(&replay_path).map_err(|e| bad(&replay_path, e.to_string()))?;
+    let size = file.metadata().map(|m| m.len()).unwrap_or(0);
+    if size != meta.replay_bytes {
+        return Err(bad(
+            &replay_path,
+            format!("truncated: {size} bytes, the checkpoint wrote {}", meta.replay_bytes),
+        ));
+    }
+    let mut r = Hashing::new(BufReader::with_capacity(1 << 20, file));
+    let v = config.variant;
+    let replay =
+        ReplayBuffer::read_from(&mut r, config.replay_capacity, v.uses_laser(), v.uses_depth())
+            .map_err(|e| bad(&replay_path, e.to_string()))?;
+    if r.hash != meta.replay_checksum {
+        return Err(bad(&replay_path, "checksum mismatch: the file is corrupt"));
+    }
+    Ok((meta, learner, replay))
+}

@@ -1,0 +1,104 @@
+//! Checkpoints resume exactly: a run interrupted after its step-200 checkpoint (even in the
+//! middle of later steps) and resumed ends with the same weights, metrics and evaluations as
+//! the run that was never interrupted. Bad checkpoints are clear errors.
+
+use mdrlat_nn::Variant;
+use mdrlat_nn::burn::prelude::Device;
+use mdrlat_sim::SimConfig;
+use mdrlat_train::{Inputs, TrainConfig, train};
+use std::path::{Path, PathBuf};
+
+fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("mdrlat-resume-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("dir");
+    d
+}
+
+fn config(variant: Variant, steps: u64) -> TrainConfig {
+    TrainConfig {
+        variant,
+        total_steps: steps,
+        seed: 4,
+        learning_starts: 50,
+        target_update_interval: 70,
+        eval_interval: 150,
+        eval_episodes: 1,
+        checkpoint_interval: 100,
+        replay_capacity: 120,
+        ..TrainConfig::default()
+    }
+}
+
+fn sim() -> SimConfig {
+    SimConfig { max_episode_steps: 60, ..SimConfig::default() }
+}
+
+fn world() -> mdrlat_world::World {
+    mdrlat_world::builtin::get("example").expect("builtin").expect("valid")
+}
+
+fn probe(learner: &mdrlat_train::Learner) -> Vec<f32> {
+    let laser: Vec<f32> = (0..4 * 512).map(|i| (i % 97) as f32 / 97.0).collect();
+    learner.q_values(&Inputs { size: 1, laser, depth: Vec::new() })
+}
+
+fn read(d: &Path, f: &str) -> String {
+    std::fs::read_to_string(d.join(f)).expect("file")
+}
+
+#[test]
+fn an_interrupted_run_resumes_exactly() {
+    let dev = Device::flex();
+    let straight = dir("straight");
+    let (_, a) =
+        train(world(), &sim(), &config(Variant::LaserOnly, 300), &dev, &straight, false, |_| {})
+            .expect("run");
+
+    // The same run killed at step 250: its last checkpoint is step 200.
+    let cut = dir("cut");
+    train(world(), &sim(), &config(Variant::LaserOnly, 250), &dev, &cut, false, |_| {})
+        .expect("run");
+    let (report, b) =
+        train(world(), &sim(), &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
+            .expect("resume");
+    assert_eq!(report.steps, 300);
+    assert_eq!(probe(&a), probe(&b), "same weights");
+    assert_eq!(read(&straight, "metrics.csv"), read(&cut, "metrics.csv"));
+    assert_eq!(read(&straight, "eval.csv"), read(&cut, "eval.csv"));
+}
+
+#[test]
+fn bad_checkpoints_are_clear_errors_never_a_fresh_start() {
+    let dev = Device::flex();
+    let run = dir("bad");
+    train(world(), &sim(), &config(Variant::LaserOnly, 100), &dev, &run, false, |_| {})
+        .expect("run");
+    let resume = |variant| train(world(), &sim(), &config(variant, 200), &dev, &run, true, |_| {});
+    let e = resume(Variant::Mdrlat).expect_err("other variant").to_string();
+    assert!(e.contains("laser-only") && e.contains("mdrlat"), "{e}");
+    // Truncate the replay file.
+    let replay = run.join("checkpoint/replay.bin");
+    let bytes = std::fs::read(&replay).expect("replay");
+    std::fs::write(&replay, &bytes[..bytes.len() / 2]).expect("write");
+    let e = resume(Variant::LaserOnly).expect_err("truncated").to_string();
+    assert!(e.contains("replay.bin") && e.contains("truncated"), "{e}");
+    // Flip a byte: the checksum catches it.
+    let mut flipped = bytes.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 0xff;
+    std::fs::write(&replay, &flipped).expect("write");
+    let e = resume(Variant::LaserOnly).expect_err("corrupt").to_string();
+    assert!(e.contains("checksum") || e.contains("replay"), "{e}");
+    std::fs::write(&replay, &bytes).expect("restore");
+    std::fs::write(run.join("checkpoint/online.bpk"), b"garbage").expect("write");
+    let e = resume(Variant::LaserOnly).expect_err("weights").to_string();
+    assert!(e.contains("online.bpk"), "{e}");
+    std::fs::write(run.join("checkpoint/meta.json"), "{").expect("write");
+    let e = resume(Variant::LaserOnly).expect_err("meta").to_string();
+    assert!(e.contains("meta.json") && e.contains("corrupt"), "{e}");
+    let empty = dir("empty");
+    let e = train(world(), &sim(), &config(Variant::LaserOnly, 200), &dev, &empty, true, |_| {})
+        .expect_err("none");
+    assert!(e.to_string().contains("no checkpoint"), "{e}");
+}
