@@ -51,6 +51,8 @@ enum Command {
     /// Trains an agent (paper Algorithm 1) into a run directory: config.toml, metrics.csv,
     /// eval.csv, model.safetensors.
     Train(cmd::train::Args),
+    /// Draws smoothed training curves of runs (paper Fig. 4) as a PNG.
+    Plot(cmd::plot::Args),
     /// Measures performance.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -112,6 +114,7 @@ fn main() -> ExitCode {
         Command::Render(a) => cmd::render::run(&a),
         Command::Rollout(a) => cmd::rollout::run(&a),
         Command::Train(a) => cmd::train::run(&a),
+        Command::Plot(a) => cmd::plot::run(&a),
         Command::Bench(BenchCommand::Sim(a)) => cmd::bench::sim(&a),
         Command::Bench(BenchCommand::Train(a)) => cmd::bench_train::run(&a),
         Command::Config(ConfigCommand::Default) => {

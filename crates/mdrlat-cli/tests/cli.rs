@@ -269,3 +269,21 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
     );
     assert_clean_failure(&mdrlat(&["train", "--out", o, "--set", "train.lr=0.1"]), &["lr"]);
 }
+
+#[test]
+fn plot_draws_runs_and_rejects_bad_files() {
+    let d = tmp("plot");
+    let run = d.join("a");
+    std::fs::create_dir_all(&run).expect("dir");
+    std::fs::write(run.join("eval.csv"), "step,eval_reward_mean,eval_reward_std,eval_length_mean\n5000,1.0,0.5,10\n10000,3.0,1.0,20\n").expect("write");
+    let png = d.join("fig4.png");
+    let o = mdrlat(&["plot", run.to_str().expect("utf8"), "--out", png.to_str().expect("utf8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::metadata(&png).expect("png").len() > 1000);
+    std::fs::write(run.join("eval.csv"), "step,eval_reward_mean,eval_reward_std\n5000,abc,0.5\n")
+        .expect("write");
+    let o = mdrlat(&["plot", run.to_str().expect("utf8"), "--out", png.to_str().expect("utf8")]);
+    assert_clean_failure(&o, &["eval.csv:2", "abc"]);
+    let missing = d.join("none");
+    assert_clean_failure(&mdrlat(&["plot", missing.to_str().expect("utf8")]), &["eval.csv"]);
+}

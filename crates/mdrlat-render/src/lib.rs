@@ -13,6 +13,7 @@
 //! [`font`], GIF colours from a fixed palette).
 
 mod animation;
+mod chart;
 mod depth;
 mod error;
 pub mod font;
@@ -21,6 +22,7 @@ mod style;
 mod top;
 
 pub use animation::{GifWriter, PALETTE_LEN};
+pub use chart::{Chart, Series, line_chart, series_colour};
 pub use depth::{depth_colour, depth_view};
 pub use error::RenderError;
 pub use image::{Image, side_by_side};

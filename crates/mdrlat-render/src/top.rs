@@ -342,7 +342,7 @@ fn paint(c: Rgb, alpha: u8) -> Paint<'static> {
     p
 }
 
-fn fill(pm: &mut Pixmap, path: &Path, c: Rgb, alpha: u8) {
+pub(crate) fn fill(pm: &mut Pixmap, path: &Path, c: Rgb, alpha: u8) {
     pm.fill_path(path, &paint(c, alpha), FillRule::Winding, Transform::identity(), None);
 }
 
@@ -350,7 +350,7 @@ fn stroke_with(pm: &mut Pixmap, path: &Path, c: Rgb, alpha: u8, stroke: &Stroke)
     pm.stroke_path(path, &paint(c, alpha), stroke, Transform::identity(), None);
 }
 
-fn stroke(pm: &mut Pixmap, path: &Path, c: Rgb, alpha: u8, width: f32) {
+pub(crate) fn stroke(pm: &mut Pixmap, path: &Path, c: Rgb, alpha: u8, width: f32) {
     let s =
         Stroke { width, line_cap: LineCap::Round, line_join: LineJoin::Round, ..Stroke::default() };
     stroke_with(pm, path, c, alpha, &s);

@@ -1,0 +1,186 @@
+//! `mdrlat plot`: smoothed training curves of several runs (paper Fig. 4).
+
+use super::ensure_parent;
+use anyhow::{Context, Result, bail};
+use mdrlat_render::{Chart, Series, line_chart};
+use std::path::{Path, PathBuf};
+
+/// What to plot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Metric {
+    /// Greedy evaluation reward (eval.csv), mean ± std band: Fig. 4.
+    Eval,
+    /// Training episode reward (metrics.csv).
+    EpisodeReward,
+    /// TD loss (metrics.csv).
+    LossTd,
+    /// Auxiliary loss (metrics.csv).
+    LossAt,
+}
+
+/// Arguments of `mdrlat plot`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Run directories (each with eval.csv / metrics.csv).
+    #[arg(required = true)]
+    runs: Vec<PathBuf>,
+    /// Output PNG.
+    #[arg(long, default_value = "fig4.png")]
+    out: PathBuf,
+    /// Exponential smoothing weight in [0, 1) (TensorBoard's; 0: none).
+    #[arg(long, default_value_t = 0.6)]
+    smooth: f32,
+    /// What to plot.
+    #[arg(long, value_enum, default_value = "eval")]
+    metric: Metric,
+}
+
+/// Rows of a CSV file as (column name → values); empty cells are NaN.
+fn read_csv(path: &Path, columns: &[&str]) -> Result<Vec<Vec<f32>>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines
+        .next()
+        .with_context(|| format!("{}: empty file", path.display()))?
+        .split(',')
+        .collect();
+    let idx: Vec<usize> = columns
+        .iter()
+        .map(|c| {
+            header
+                .iter()
+                .position(|h| h == c)
+                .with_context(|| format!("{}: no column '{c}'", path.display()))
+        })
+        .collect::<Result<_>>()?;
+    let mut out = vec![Vec::new(); columns.len()];
+    for (n, line) in lines.enumerate() {
+        let cells: Vec<&str> = line.split(',').collect();
+        for (k, &i) in idx.iter().enumerate() {
+            let cell = cells
+                .get(i)
+                .with_context(|| format!("{}:{}: too few columns", path.display(), n + 2))?;
+            let v = if cell.is_empty() {
+                f32::NAN
+            } else {
+                cell.parse::<f32>().with_context(|| {
+                    format!("{}:{}: '{cell}' is not a number", path.display(), n + 2)
+                })?
+            };
+            out[k].push(v);
+        }
+    }
+    Ok(out)
+}
+
+/// TensorBoard's debiased exponential moving average, skipping NaN.
+fn smooth(values: &[f32], weight: f32) -> Vec<f32> {
+    let (mut last, mut n) = (0.0f32, 0i32);
+    values
+        .iter()
+        .map(|&v| {
+            if !v.is_finite() {
+                return f32::NAN;
+            }
+            n += 1;
+            last = last * weight + (1.0 - weight) * v;
+            last / (1.0 - weight.powi(n))
+        })
+        .collect()
+}
+
+fn run_label(dir: &Path) -> String {
+    let name = dir
+        .file_name()
+        .map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+    let variant = std::fs::read_to_string(dir.join("config.toml")).ok().and_then(|t| {
+        t.lines().find_map(|l| {
+            l.trim().strip_prefix("variant = ").map(|v| v.trim_matches('"').to_string())
+        })
+    });
+    match variant {
+        Some(v) if !name.contains(&v) => format!("{v} ({name})"),
+        _ => name,
+    }
+}
+
+/// Runs `mdrlat plot`.
+pub fn run(a: &Args) -> Result<()> {
+    if !(0.0..1.0).contains(&a.smooth) {
+        bail!("--smooth {}: must be in [0, 1)", a.smooth);
+    }
+    let mut series = Vec::new();
+    for dir in &a.runs {
+        let label = run_label(dir);
+        let s = match a.metric {
+            Metric::Eval => {
+                let c = read_csv(
+                    &dir.join("eval.csv"),
+                    &["step", "eval_reward_mean", "eval_reward_std"],
+                )?;
+                let (mean, std) = (smooth(&c[1], a.smooth), smooth(&c[2], a.smooth));
+                Series {
+                    label,
+                    points: c[0].iter().copied().zip(mean.iter().copied()).collect(),
+                    band: c[0]
+                        .iter()
+                        .zip(mean.iter().zip(&std))
+                        .map(|(&x, (&m, &s))| (x, m - s, m + s))
+                        .collect(),
+                }
+            }
+            m => {
+                let col = match m {
+                    Metric::EpisodeReward => "episode_reward",
+                    Metric::LossTd => "loss_td",
+                    _ => "loss_at",
+                };
+                let c = read_csv(&dir.join("metrics.csv"), &["step", col])?;
+                let keep: Vec<(f32, f32)> = c[0]
+                    .iter()
+                    .copied()
+                    .zip(c[1].iter().copied())
+                    .filter(|p| p.1.is_finite())
+                    .collect();
+                let ys = smooth(&keep.iter().map(|p| p.1).collect::<Vec<_>>(), a.smooth);
+                Series {
+                    label,
+                    points: keep.iter().map(|p| p.0).zip(ys).collect(),
+                    band: Vec::new(),
+                }
+            }
+        };
+        if s.points.is_empty() {
+            bail!("{}: no data yet (no evaluation or log row written)", dir.display());
+        }
+        series.push(s);
+    }
+    let (title, y) = match a.metric {
+        Metric::Eval => ("Average accumulated reward (greedy, from fixed start poses)", "reward"),
+        Metric::EpisodeReward => ("Training episode reward", "reward"),
+        Metric::LossTd => ("TD loss (eq. 13)", "loss"),
+        Metric::LossAt => ("Auxiliary loss (eq. 12)", "loss"),
+    };
+    let img = line_chart(
+        &Chart { title, x_label: "training steps", y_label: y, series: &series },
+        1000,
+        620,
+    );
+    ensure_parent(&a.out)?;
+    img.save_png(&a.out)?;
+    out!("wrote {} ({} runs, smoothing {})", a.out.display(), series.len(), a.smooth);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn smoothing_is_debiased_and_skips_gaps() {
+        let s = smooth(&[2.0, f32::NAN, 2.0, 2.0], 0.6);
+        assert!((s[0] - 2.0).abs() < 1e-6 && s[1].is_nan() && (s[3] - 2.0).abs() < 1e-5);
+        assert_eq!(smooth(&[1.0, 3.0], 0.0), [1.0, 3.0]);
+    }
+}
