@@ -9,6 +9,7 @@ pub mod config;
 pub mod export;
 pub mod learner;
 pub mod replay;
+pub mod tensorboard;
 pub mod train;
 
 pub use config::{TrainConfig, TrainConfigError};

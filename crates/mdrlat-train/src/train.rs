@@ -6,6 +6,7 @@ use crate::checkpoint::{self, FRAME_RESERVE, Meta, Window};
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner, Losses};
 use crate::replay::{Batch, ReplayBuffer, Transition};
+use crate::tensorboard::EventWriter;
 use mdrlat_core::{Action, FRAME_STACK, ODOM_HISTORY, Rng, normalize_depth, normalize_laser};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
@@ -181,15 +182,15 @@ pub fn evaluate(
     Ok(eval)
 }
 
-/// Keeps the rows of a run's CSV file up to `step` (those a resumed run will not write
-/// again) and opens it for appending.
-fn reopen(path: PathBuf, step: u64) -> Result<Csv, TrainError> {
+/// Keeps the rows of a run's CSV file before `step` (and at `step` with `keep_step`): those
+/// a resumed run will not write again. Opens the file for appending.
+fn reopen(path: PathBuf, step: u64, keep_step: bool) -> Result<Csv, TrainError> {
     let io = |source| TrainError::Io { path: path.clone(), source };
     let text = std::fs::read_to_string(&path).map_err(io)?;
     let mut kept = String::with_capacity(text.len());
     for (i, line) in text.lines().enumerate() {
         let row_step = line.split(',').next().and_then(|f| f.parse::<u64>().ok());
-        if i == 0 || row_step.is_some_and(|s| s <= step) {
+        if i == 0 || row_step.is_some_and(|s| s < step || (s == step && keep_step)) {
             kept.push_str(line);
             kept.push('\n');
         }
@@ -230,8 +231,9 @@ pub fn train(
     let (mut learner, mut replay, mut run, mut metrics, mut evals_csv) = if resume {
         let (run, learner, replay) = checkpoint::load(dir, config, device)?;
         env.restore(&run.env)?;
-        let metrics = reopen(dir.join("metrics.csv"), run.step)?;
-        let evals = reopen(dir.join("eval.csv"), run.step)?;
+        // A partial-window row at the checkpoint step is written again, complete.
+        let metrics = reopen(dir.join("metrics.csv"), run.step, run.step % LOG_INTERVAL == 0)?;
+        let evals = reopen(dir.join("eval.csv"), run.step, true)?;
         (learner, replay, run, metrics, evals)
     } else {
         // Seeding in one block: network init (inside Learner::new), environment,
@@ -271,6 +273,10 @@ pub fn train(
         )?;
         (Learner::new(config, device), replay, run, metrics, evals)
     };
+    let mut events = EventWriter::create(dir)
+        .map_err(|source| TrainError::Io { path: dir.to_path_buf(), source })?;
+    let tb_err =
+        |events: &EventWriter, source| TrainError::Io { path: events.path().to_path_buf(), source };
     let mut inputs = Inputs::default();
     let mut batch = Batch::default();
     let mut status = Status { step: run.step, episodes: run.episodes, ..Status::default() };
@@ -350,17 +356,47 @@ pub fn train(
                 mean(w.episode_length, w.episodes),
                 run.episodes
             ))?;
-            run.window = Window::default();
+            let per = |x: f64, n: u32| if n > 0 { (x / f64::from(n)) as f32 } else { f32::NAN };
+            events
+                .scalars(
+                    t,
+                    &[
+                        ("losses/td", per(w.td, w.updates)),
+                        ("losses/at", per(w.at, w.updates)),
+                        ("losses/q_mean", per(w.q, w.updates)),
+                        ("charts/epsilon", epsilon),
+                        ("charts/episode_reward", per(w.episode_reward, w.episodes)),
+                        ("charts/episode_length", per(w.episode_length, w.episodes)),
+                    ],
+                )
+                .map_err(|e| tb_err(&events, e))?;
+            // A run's last row may cover a partial window; its sums stay open (and go into
+            // the checkpoint) so that an extended run logs exactly what one long run would.
+            if t % LOG_INTERVAL == 0 {
+                run.window = Window::default();
+            }
         }
         if t % config.eval_interval == 0 {
             let e = evaluate(&mut eval_env, &learner, config, t)?;
             let mean_len = e.lengths.iter().map(|&l| f64::from(l)).sum::<f64>()
                 / e.lengths.len().max(1) as f64;
             evals_csv.line(&format!("{t},{:.6},{:.6},{mean_len:.2}", e.mean(), e.std()))?;
+            events
+                .scalars(
+                    t,
+                    &[
+                        ("eval/reward_mean", e.mean()),
+                        ("eval/reward_std", e.std()),
+                        ("eval/length_mean", mean_len as f32),
+                    ],
+                )
+                .map_err(|e| tb_err(&events, e))?;
             status.last_eval = Some(e.mean());
             report.evaluations.push(e);
         }
-        if t % config.checkpoint_interval == 0 {
+        // A checkpoint every interval and at the end, so a finished run can be extended.
+        if t % config.checkpoint_interval == 0 || t == config.total_steps {
+            events.flush().map_err(|e| tb_err(&events, e))?;
             metrics.flush()?;
             evals_csv.flush()?;
             run.step = t;
@@ -375,6 +411,7 @@ pub fn train(
     }
     metrics.flush()?;
     evals_csv.flush()?;
+    events.flush().map_err(|e| tb_err(&events, e))?;
     report.steps = config.total_steps;
     report.updates = learner.updates();
     report.episodes = run.episodes;

@@ -55,10 +55,14 @@ fn an_interrupted_run_resumes_exactly() {
         train(world(), &sim(), &config(Variant::LaserOnly, 300), &dev, &straight, false, |_| {})
             .expect("run");
 
-    // The same run killed at step 250: its last checkpoint is step 200.
+    // The same run stopped at step 250 (its last checkpoint), then killed while it wrote
+    // rows past the checkpoint: a resumed run must drop those rows and redo the steps.
     let cut = dir("cut");
     train(world(), &sim(), &config(Variant::LaserOnly, 250), &dev, &cut, false, |_| {})
         .expect("run");
+    let mut m = read(&cut, "metrics.csv");
+    m.push_str("260,9,9,9,9,9,9,9\n270,9,9,9,9,9,9,9\n");
+    std::fs::write(cut.join("metrics.csv"), m).expect("write");
     let (report, b) =
         train(world(), &sim(), &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
             .expect("resume");

@@ -183,7 +183,7 @@ pub fn run(a: &Args) -> Result<()> {
         last.unwrap_or_else(|| "none this session".into())
     );
     out!(
-        "wrote {0}/config.toml, run.toml, metrics.csv, eval.csv, checkpoint/, model.safetensors",
+        "wrote {0}/config.toml, run.toml, metrics.csv, eval.csv, events.out.tfevents.*, checkpoint/, model.safetensors",
         dir.display()
     );
     Ok(())
