@@ -370,6 +370,7 @@ pub fn train(
                     ],
                 )
                 .map_err(|e| tb_err(&events, e))?;
+            metrics.flush()?; // one write per 100 steps: `tail -f metrics.csv` works
             // A run's last row may cover a partial window; its sums stay open (and go into
             // the checkpoint) so that an extended run logs exactly what one long run would.
             if t % LOG_INTERVAL == 0 {
