@@ -57,14 +57,29 @@ pub fn update_ms(
     })
 }
 
-/// Median milliseconds of one greedy decision (batch 1) of `variant` on `device`.
-pub fn infer_ms(variant: Variant, device: &Device, min_time: Duration) -> (f64, usize) {
+/// Median milliseconds of one greedy decision (batch 1) of `variant` on `device`, with the
+/// CPU backend's kernels limited to `threads` threads (1: one core, as on the robot).
+///
+/// # Panics
+/// If the OS refuses the measurement's thread.
+pub fn infer_ms(
+    variant: Variant,
+    device: &Device,
+    min_time: Duration,
+    threads: usize,
+) -> (f64, usize) {
     let config = TrainConfig { variant, ..TrainConfig::default() };
     let learner = Learner::new(&config, device);
     let b = random_batch(variant, 1, 2);
     let inputs = Inputs { size: 1, laser: b.laser, depth: b.depth };
-    median_ms(min_time, || {
-        learner.greedy(&inputs);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .build()
+        .expect("inference thread pool");
+    pool.install(|| {
+        median_ms(min_time, || {
+            learner.greedy(&inputs);
+        })
     })
 }
 

@@ -40,16 +40,16 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             std::thread::available_parallelism().map_or(1, |n| n.get())
         );
         out!(
-            "{:<11} {:>16} {:>18} {:>14}",
+            "{:<11} {:>16} {:>22} {:>14}",
             "variant",
             "train step (ms)",
-            "inference 1 (ms)",
+            "inference, 1 core (ms)",
             "replay (MiB)"
         );
     }
     for v in variants {
         let (train, n_train) = update_ms(v, a.batch, &device, time);
-        let (infer, n_infer) = infer_ms(v, &device, time);
+        let (infer, n_infer) = infer_ms(v, &device, time, 1);
         let replay = replay_bytes(v, 20_000) as f64 / (1024.0 * 1024.0);
         if a.json {
             out!(
@@ -60,7 +60,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             out!(
                 "{}",
                 serde_json::json!({"bench": "infer", "variant": v.name(), "backend": backend,
-                    "threads": std::thread::available_parallelism().map_or(1, |n| n.get()),
+                    "threads": 1,
                     "ms": (infer * 1000.0).round() / 1000.0, "samples": n_infer})
             );
             out!(
@@ -68,7 +68,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
                 serde_json::json!({"bench": "replay", "variant": v.name(), "capacity": 20_000, "mib": (replay * 10.0).round() / 10.0})
             );
         } else {
-            out!("{:<11} {:>16.1} {:>18.2} {:>14.0}", v.name(), train, infer, replay);
+            out!("{:<11} {:>16.1} {:>22.2} {:>14.0}", v.name(), train, infer, replay);
         }
     }
     Ok(())
