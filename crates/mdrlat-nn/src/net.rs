@@ -294,6 +294,50 @@ impl QNet {
         Tensor::cat(parts, 1)
     }
 
+    /// Wall time of each stage of one forward pass, milliseconds, in order (for `mdrlat
+    /// bench train --profile`). Meaningful on eager CPU backends, where every operation has
+    /// finished when it returns.
+    ///
+    /// # Shapes
+    /// As [`QNet::forward`].
+    pub fn stage_times(
+        &self,
+        laser: Option<Tensor<3>>,
+        depth: Option<Tensor<4>>,
+    ) -> Vec<(&'static str, f64)> {
+        let mut times = Vec::new();
+        let mut timed = |name: &'static str, f: &mut dyn FnMut() -> Tensor<2>| {
+            let t = std::time::Instant::now();
+            let out = f();
+            let _ = out.clone().into_data(); // make sure the work is done
+            times.push((name, t.elapsed().as_secs_f64() * 1e3));
+            out
+        };
+        let d = self
+            .depth
+            .as_ref()
+            .zip(depth)
+            .map(|(s, x)| timed("depth stream (3 conv)", &mut || s.forward(x.clone())));
+        let l = self
+            .laser
+            .as_ref()
+            .zip(laser)
+            .map(|(s, x)| timed("laser stream (3 conv1d)", &mut || s.forward(x.clone())));
+        let f = match (&self.fusion, &d, &l) {
+            (Some(fu), Some(d), Some(l)) => {
+                Some(timed("bilinear fusion", &mut || fu.forward(d.clone(), l.clone())))
+            }
+            _ => None,
+        };
+        let h = Tensor::cat([d, f, l].into_iter().flatten().collect(), 1);
+        timed("value head", &mut || self.value.forward(h.clone()));
+        timed("advantage head", &mut || self.advantage.forward(h.clone()));
+        if let Some(v) = &self.velocity {
+            timed("velocity head (AT)", &mut || v.forward(h.clone()));
+        }
+        times
+    }
+
     /// Q-values and, with the auxiliary task, the velocity estimate.
     ///
     /// # Shapes

@@ -87,3 +87,45 @@ pub fn infer_ms(
 pub fn replay_bytes(variant: Variant, capacity: usize) -> usize {
     ReplayBuffer::new(capacity, 512, variant.uses_laser(), variant.uses_depth()).memory_bytes()
 }
+
+/// Where one gradient step's time goes, milliseconds: the forward pass by stage (batch
+/// `batch`, no autodiff), the two target-network forwards of eq. (10), and the rest of the
+/// step (forward with autodiff, backward, Adam), each a median.
+pub fn profile(
+    variant: Variant,
+    batch: usize,
+    device: &Device,
+    min_time: Duration,
+) -> Vec<(String, f64)> {
+    let config = TrainConfig { variant, batch_size: batch, ..TrainConfig::default() };
+    let mut learner = Learner::new(&config, device);
+    let b = random_batch(variant, batch, 3);
+    let mut stages: Vec<(String, Vec<f64>)> = Vec::new();
+    let start = Instant::now();
+    while start.elapsed() < min_time || stages.first().is_none_or(|s| s.1.len() < 3) {
+        for (i, (name, ms)) in learner.stage_times(&b).into_iter().enumerate() {
+            if stages.len() <= i {
+                stages.push((name.to_string(), Vec::new()));
+            }
+            stages[i].1.push(ms);
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let mut out: Vec<(String, f64)> =
+        stages.into_iter().map(|(n, mut v)| (n, median(&mut v))).collect();
+    let forward: f64 = out.iter().map(|s| s.1).sum();
+    let (targets, _) = median_ms(min_time, || {
+        learner.td_targets(&b);
+    });
+    let (step, _) = median_ms(min_time, || {
+        learner.update(&b);
+    });
+    out.push(("= forward, one pass".into(), forward));
+    out.push(("target forwards (eq. 10, 2 passes)".into(), targets));
+    out.push(("forward + backward + Adam".into(), (step - targets).max(0.0)));
+    out.push(("= gradient step".into(), step));
+    out
+}

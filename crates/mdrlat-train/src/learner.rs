@@ -263,6 +263,12 @@ impl Learner {
         self.target = self.online.valid();
     }
 
+    /// Forward stage times of the online network on `batch` (no autodiff), milliseconds.
+    pub fn stage_times(&self, batch: &Batch) -> Vec<(&'static str, f64)> {
+        let (l, d) = self.inputs::<false>(&batch.laser, &batch.depth, batch.size);
+        self.online.valid().stage_times(l, d)
+    }
+
     /// The online network without autodiff (for evaluation and export).
     pub fn policy_net(&self) -> QNet {
         self.online.valid()

@@ -4,7 +4,7 @@ use super::bench::cpu_model;
 use super::train::DeviceKind;
 use anyhow::Result;
 use mdrlat_nn::Variant;
-use mdrlat_train::bench::{infer_ms, replay_bytes, update_ms};
+use mdrlat_train::bench::{infer_ms, profile, replay_bytes, update_ms};
 use std::time::Duration;
 
 /// Arguments of `mdrlat bench train`.
@@ -25,6 +25,10 @@ pub struct TrainArgs {
     /// Print one JSON object per line instead of a table.
     #[arg(long)]
     json: bool,
+    /// Also break the step down: forward time per network stage, target forwards, and
+    /// forward + backward + Adam.
+    #[arg(long)]
+    profile: bool,
 }
 
 /// `mdrlat bench train`.
@@ -69,6 +73,23 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             );
         } else {
             out!("{:<11} {:>16.1} {:>22.2} {:>14.0}", v.name(), train, infer, replay);
+        }
+    }
+    if a.profile {
+        let v = a.variants.first().copied().unwrap_or(Variant::Mdrlat);
+        let rows = profile(v, a.batch, &device, time);
+        if a.json {
+            for (stage, ms) in &rows {
+                out!(
+                    "{}",
+                    serde_json::json!({"bench": "profile", "variant": v.name(), "stage": stage, "ms": (ms * 100.0).round() / 100.0})
+                );
+            }
+        } else {
+            out!("\nwhere a {} step goes (batch {}):", v.name(), a.batch);
+            for (stage, ms) in &rows {
+                out!("  {stage:<36} {ms:>8.1} ms");
+            }
         }
     }
     Ok(())
