@@ -154,7 +154,7 @@ impl DepthStream {
 }
 
 /// The depth network input: the first convolution's SAME-padded patches of a batch of
-/// normalised `[B, 4, rows, cols]` depth stacks, as `[B, out_rows, out_cols, 560]`
+/// normalised `[B, frames, rows, cols]` depth stacks, as `[B, out_rows, out_cols, 560]`
 /// (`[B, 16, 20, 560]` at 128 x 160). See the `patches` module for why.
 pub fn depth_patches(
     stacks: &[f32],
@@ -163,7 +163,8 @@ pub fn depth_patches(
     cols: usize,
     device: &Device,
 ) -> Tensor<4> {
-    let g = PatchGeometry::depth_conv1(rows, cols);
+    let frames = stacks.len() / (batch * rows * cols).max(1);
+    let g = PatchGeometry::depth_conv1(frames, rows, cols);
     let mut buf = Vec::new();
     g.extract(stacks, batch, &mut buf);
     let [oh, ow] = g.out();

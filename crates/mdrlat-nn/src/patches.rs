@@ -23,9 +23,9 @@ pub struct PatchGeometry {
 }
 
 impl PatchGeometry {
-    /// The paper's first depth convolution on `[4, rows, cols]` frames.
-    pub fn depth_conv1(rows: usize, cols: usize) -> Self {
-        Self { channels: 4, rows, cols, kernel: [10, 14], stride: 8 }
+    /// The paper's first depth convolution on `[frames, rows, cols]` stacks.
+    pub fn depth_conv1(frames: usize, rows: usize, cols: usize) -> Self {
+        Self { channels: frames, rows, cols, kernel: [10, 14], stride: 8 }
     }
 
     /// Output rows and columns (TensorFlow SAME: `ceil(in / stride)`).
@@ -112,7 +112,7 @@ mod tests {
         assert_eq!(&out[0..9], &[0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 5.0, 6.0]);
         // Centre patch (position 4) is centred on pixel (2, 2) = 12.
         assert_eq!(&out[4 * 9..5 * 9], &[6.0, 7.0, 8.0, 11.0, 12.0, 13.0, 16.0, 17.0, 18.0]);
-        let paper = PatchGeometry::depth_conv1(128, 160);
+        let paper = PatchGeometry::depth_conv1(4, 128, 160);
         assert_eq!((paper.out(), paper.patch_len()), ([16, 20], 560));
     }
 }

@@ -85,7 +85,8 @@ pub fn infer_ms(
 
 /// Bytes of a full replay buffer of `capacity` transitions for `variant`.
 pub fn replay_bytes(variant: Variant, capacity: usize) -> usize {
-    ReplayBuffer::new(capacity, 512, variant.uses_laser(), variant.uses_depth()).memory_bytes()
+    let reserve = crate::checkpoint::frame_reserve(capacity);
+    ReplayBuffer::new(capacity, reserve, variant.uses_laser(), variant.uses_depth()).memory_bytes()
 }
 
 /// Where one gradient step's time goes, milliseconds: the forward pass by stage (batch

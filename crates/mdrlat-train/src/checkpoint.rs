@@ -26,8 +26,12 @@ use std::path::{Path, PathBuf};
 /// Version of the checkpoint format this build reads and writes.
 pub const CHECKPOINT_FORMAT: u32 = 1;
 
-/// Frame slots the training loop reserves beyond the replay capacity.
-pub(crate) const FRAME_RESERVE: usize = 512;
+/// Frame slots the training loop reserves beyond the replay capacity: an episode of L steps
+/// stores L + 1 frames, so with capacity / 8 spare slots the buffer holds its full capacity
+/// whenever episodes average 8 steps or more (and ~89% of it at 4).
+pub fn frame_reserve(capacity: usize) -> usize {
+    (capacity / 8).max(64)
+}
 
 /// Running sums of the current `metrics.csv` window.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -155,15 +159,21 @@ pub fn save(
     meta.replay_checksum = w.hash;
     let meta_path = tmp.join("meta.json");
     let text = serde_json::to_string(meta).map_err(|e| bad(&meta_path, e.to_string()))?;
-    std::fs::write(&meta_path, text).map_err(|e| bad(&meta_path, e.to_string()))?;
-    // Swap: the old checkpoint stays valid until the new one is complete.
+    File::create(&meta_path)
+        .and_then(|mut f| f.write_all(text.as_bytes()).and_then(|()| f.sync_all()))
+        .map_err(|e| bad(&meta_path, e.to_string()))?;
+    // Swap. Until the new folder is in place, either `checkpoint/` or `checkpoint.old/`
+    // holds a complete checkpoint (load falls back to the latter).
     let dest = folder(run_dir);
     let old = run_dir.join("checkpoint.old");
-    let _ = std::fs::remove_dir_all(&old);
     if dest.exists() {
+        let _ = std::fs::remove_dir_all(&old);
         std::fs::rename(&dest, &old).map_err(|e| bad(&dest, e.to_string()))?;
     }
     std::fs::rename(&tmp, &dest).map_err(|e| bad(&dest, e.to_string()))?;
+    if let Ok(d) = File::open(run_dir) {
+        let _ = d.sync_all(); // the renames reach the disk
+    }
     let _ = std::fs::remove_dir_all(&old);
     Ok(())
 }
@@ -215,12 +225,33 @@ pub fn load(
         ));
     }
     let mut r = Hashing::new(BufReader::with_capacity(1 << 20, file));
-    let v = config.variant;
-    let replay =
-        ReplayBuffer::read_from(&mut r, config.replay_capacity, v.uses_laser(), v.uses_depth())
-            .map_err(|e| bad(&replay_path, e.to_string()))?;
+    let (v, cap) = (config.variant, config.replay_capacity);
+    let replay = ReplayBuffer::read_from(
+        &mut r,
+        size,
+        cap,
+        frame_reserve(cap),
+        v.uses_laser(),
+        v.uses_depth(),
+    )
+    .map_err(|e| bad(&replay_path, e.to_string()))?;
     if r.hash != meta.replay_checksum {
         return Err(bad(&replay_path, "checksum mismatch: the file is corrupt"));
+    }
+    if !meta.stack.iter().all(|&id| replay.holds_frame(id)) {
+        return Err(bad(
+            &meta_path,
+            "the current frame stack refers to frames the replay file does not hold",
+        ));
+    }
+    if meta.step > config.total_steps {
+        return Err(bad(
+            &meta_path,
+            format!(
+                "the checkpoint is at step {}, beyond train.total_steps {}: give --steps",
+                meta.step, config.total_steps
+            ),
+        ));
     }
     Ok((meta, learner, replay))
 }

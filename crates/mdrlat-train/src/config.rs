@@ -115,6 +115,27 @@ impl TrainConfig {
                 format!("{} exceeds the replay capacity {}", self.batch_size, self.replay_capacity),
             );
         }
+        if self.replay_capacity > 1_000_000 {
+            return err(
+                "train.replay_capacity",
+                format!(
+                    "{} is above 1,000,000 transitions (41 KB each with depth)",
+                    self.replay_capacity
+                ),
+            );
+        }
+        if self.learning_starts > self.replay_capacity as u64 {
+            return err(
+                "train.learning_starts",
+                format!(
+                    "{} exceeds the replay capacity {}: learning would never start",
+                    self.learning_starts, self.replay_capacity
+                ),
+            );
+        }
+        if self.eval_episodes == 0 {
+            return err("train.eval_episodes", "must be at least 1".into());
+        }
         if self.learning_starts < self.batch_size as u64 {
             return err(
                 "train.learning_starts",
@@ -186,5 +207,11 @@ mod tests {
         assert!(e.contains("train.gamma"), "{e}");
         let e = bad(TrainConfig { learning_starts: 4, ..Default::default() });
         assert!(e.contains("train.learning_starts"), "{e}");
+        let e = bad(TrainConfig { learning_starts: 30_000, ..Default::default() });
+        assert!(e.contains("train.learning_starts") && e.contains("never"), "{e}");
+        let e = bad(TrainConfig { eval_episodes: 0, ..Default::default() });
+        assert!(e.contains("train.eval_episodes"), "{e}");
+        let e = bad(TrainConfig { replay_capacity: 10_000_000, ..Default::default() });
+        assert!(e.contains("train.replay_capacity"), "{e}");
     }
 }

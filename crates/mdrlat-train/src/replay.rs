@@ -2,7 +2,7 @@
 //!
 //! A transition refers to its 4-frame stacks by frame ids; the frames live once in a ring of
 //! `u16` millimetres (laser 1 KiB, depth 40 KiB per frame). Consecutive transitions of an
-//! episode share three of their four frames, so 20,000 transitions cost ~0.84 GB instead of
+//! episode share three of their four frames, so 20,000 transitions cost ~0.94 GB instead of
 //! the ~13 GB of two `f32` stacks each. When the frame ring wraps, transitions whose frames
 //! are overwritten leave the buffer first (they are the oldest), so the buffer never returns
 //! a stale frame.
@@ -87,7 +87,9 @@ fn to_m(mm: u16) -> f32 {
 
 impl ReplayBuffer {
     /// A buffer of `capacity` transitions. `frame_reserve` extra frame slots absorb the
-    /// extra first frame of every episode and the stacks in flight (a few hundred is ample).
+    /// extra first frame of every episode: with episodes of L steps the buffer holds
+    /// `min(capacity, (capacity + reserve) · L / (L + 1))` transitions (see
+    /// `checkpoint::frame_reserve`).
     pub fn new(capacity: usize, frame_reserve: usize, keep_laser: bool, keep_depth: bool) -> Self {
         let frame_slots = capacity + frame_reserve.max(2 * FRAME_STACK);
         Self {
@@ -153,6 +155,11 @@ impl ReplayBuffer {
             }
         }
         id
+    }
+
+    /// True if frame `id` is still stored.
+    pub fn holds_frame(&self, id: FrameId) -> bool {
+        id < self.frames_pushed && id >= self.frames_pushed.saturating_sub(self.frame_slots as u64)
     }
 
     /// True if every frame of `t` is still stored.
@@ -320,7 +327,9 @@ impl ReplayBuffer {
     /// A read error, a truncated or foreign file, or a buffer of another shape.
     pub fn read_from(
         mut r: impl std::io::Read,
+        len: u64,
         capacity: usize,
+        frame_reserve: usize,
         keep_laser: bool,
         keep_depth: bool,
     ) -> std::io::Result<Self> {
@@ -344,9 +353,24 @@ impl ReplayBuffer {
                 [u8::from(keep_laser), u8::from(keep_depth)]
             )));
         }
-        if slots < cap || slots > cap + (1 << 20) || count > cap || pushed < count {
+        if slots != (capacity + frame_reserve) as u64
+            || count > cap
+            || pushed < count
+            || pushed > 1 << 62
+        {
             return Err(io_err(format!(
                 "inconsistent replay header: {slots} slots, {count} transitions, {pushed} frames"
+            )));
+        }
+        // Check the length the header implies before allocating anything it asks for.
+        let rec = (8 * 2 * FRAME_STACK + 1 + 4 + 1 + 4 * 2 * ODOM_HISTORY) as u64;
+        let per_frame = (u64::from(keep_laser) * LASER_BEAMS as u64
+            + u64::from(keep_depth) * DEPTH_LEN as u64)
+            * 2;
+        let expect = 8 + 4 * 8 + 2 + slots * per_frame + count * rec;
+        if len != expect {
+            return Err(io_err(format!(
+                "the header implies {expect} bytes, the file has {len}: truncated or corrupt"
             )));
         }
         let mut buf = ReplayBuffer::new(capacity, (slots - cap) as usize, keep_laser, keep_depth);
@@ -380,9 +404,13 @@ impl ReplayBuffer {
                 terminated: b[base + 5] == 1,
                 odom: std::array::from_fn(|k| f32_at(base + 6 + 4 * k)),
             };
-            if !buf.is_live(&t) || t.action as usize >= 10 {
+            let in_order =
+                buf.transitions.back().is_none_or(|p| p.oldest_frame() <= t.oldest_frame());
+            let chained = t.next[..FRAME_STACK - 1] == t.obs[1..];
+            if !buf.is_live(&t) || t.action as usize >= 10 || !in_order || !chained {
                 return Err(io_err(
-                    "replay transition refers to frames the file does not hold".into(),
+                    "replay transitions are out of order or refer to frames the file does not hold"
+                        .into(),
                 ));
             }
             buf.transitions.push_back(t);

@@ -123,6 +123,22 @@ impl EventWriter {
         self.record(&ev)
     }
 
+    /// Marks a restart at `step` (`SessionLog { status: START }`): TensorBoard then drops
+    /// the points after `step` that an interrupted run had written.
+    ///
+    /// # Errors
+    /// A write error.
+    pub fn session_start(&mut self, step: u64) -> std::io::Result<()> {
+        // Event { wall_time = 1, step = 2, session_log = 6 { status = 1: START } }
+        let mut ev = Vec::new();
+        ev.push(0x09);
+        ev.extend_from_slice(&wall_time().to_le_bytes());
+        ev.push(0x10);
+        varint(step, &mut ev);
+        len_field(0x32, &[0x08, 0x01], &mut ev);
+        self.record(&ev)
+    }
+
     /// Flushes buffered events to the file.
     ///
     /// # Errors

@@ -2,7 +2,7 @@
 //! final weights. It reads top to bottom like the algorithm; `// Algorithm 1, line N` marks
 //! each step.
 
-use crate::checkpoint::{self, FRAME_RESERVE, Meta, Window};
+use crate::checkpoint::{self, Meta, Window, frame_reserve};
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner, Losses};
 use crate::replay::{Batch, ReplayBuffer, Transition};
@@ -241,7 +241,7 @@ pub fn train(
         env.reset_stream(config.seed, 0)?;
         let mut replay = ReplayBuffer::new(
             config.replay_capacity,
-            FRAME_RESERVE,
+            frame_reserve(config.replay_capacity),
             variant.uses_laser(),
             variant.uses_depth(),
         );
@@ -277,6 +277,9 @@ pub fn train(
         .map_err(|source| TrainError::Io { path: dir.to_path_buf(), source })?;
     let tb_err =
         |events: &EventWriter, source| TrainError::Io { path: events.path().to_path_buf(), source };
+    if resume {
+        events.session_start(run.step).map_err(|e| tb_err(&events, e))?;
+    }
     let mut inputs = Inputs::default();
     let mut batch = Batch::default();
     let mut status = Status { step: run.step, episodes: run.episodes, ..Status::default() };
@@ -392,6 +395,7 @@ pub fn train(
                     ],
                 )
                 .map_err(|e| tb_err(&events, e))?;
+            evals_csv.flush()?;
             status.last_eval = Some(e.mean());
             report.evaluations.push(e);
         }

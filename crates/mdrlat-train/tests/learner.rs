@@ -24,26 +24,29 @@ fn batch(b: usize, terminated: &[f32], rng: &mut Rng, depth: bool) -> Batch {
 }
 
 #[test]
-fn only_termination_zeroes_the_bootstrap() {
-    let cfg = TrainConfig { variant: Variant::LaserOnly, ..TrainConfig::default() };
-    let learner = Learner::new(&cfg, &Device::flex());
+fn only_termination_zeroes_the_bootstrap_and_the_online_net_picks() {
+    let cfg =
+        TrainConfig { variant: Variant::LaserOnly, learning_rate: 1e-3, ..TrainConfig::default() };
+    let mut learner = Learner::new(&cfg, &Device::flex());
     let mut rng = Rng::seed_from_u64(1);
+    // A few updates without a target sync: the online and target networks now differ.
+    let warm = batch(8, &[0.0; 8], &mut rng, false);
+    for _ in 0..5 {
+        learner.update(&warm);
+    }
     // Rows 0 and 2 terminated (collision); rows 1 and 3 truncated or mid-episode: bootstrap.
     let b = batch(4, &[1.0, 0.0, 1.0, 0.0], &mut rng, false);
     let y = learner.td_targets(&b);
-    let q_next = learner.target_q_next(&b);
-    let greedy = learner.greedy(&mdrlat_train::Inputs {
-        size: 4,
-        laser: b.next_laser.clone(),
-        depth: vec![],
-    });
+    let q_target = learner.target_q_next(&b);
+    let next = mdrlat_train::Inputs { size: 4, laser: b.next_laser.clone(), depth: vec![] };
+    assert_ne!(learner.q_values(&next), q_target, "the networks diverged");
+    let greedy = learner.greedy(&next);
     for row in 0..4 {
         let expect = if b.terminated[row] == 1.0 {
             b.rewards[row]
         } else {
-            // Double DQN: the online network picks, the target network evaluates (eq. 10);
-            // right after init the two are the same network.
-            b.rewards[row] + 0.99 * q_next[row * 10 + greedy[row]]
+            // Double DQN (eq. 10): the online network picks, the target network evaluates.
+            b.rewards[row] + 0.99 * q_target[row * 10 + greedy[row]]
         };
         assert!((y[row] - expect).abs() < 1e-5, "row {row}: {} vs {expect}", y[row]);
     }

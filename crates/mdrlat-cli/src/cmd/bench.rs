@@ -89,6 +89,9 @@ pub fn measure(
         a.threads
     };
     let envs = a.envs.unwrap_or(2 * threads);
+    if !(a.seconds.is_finite() && (0.0..=3600.0).contains(&a.seconds)) {
+        anyhow::bail!("--seconds {}: must be between 0 and 3600", a.seconds);
+    }
     let time = Duration::from_secs_f64(a.seconds.max(0.05));
     let mut out = Vec::new();
     for name in &a.worlds {

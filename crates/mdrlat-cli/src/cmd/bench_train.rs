@@ -34,6 +34,12 @@ pub struct TrainArgs {
 /// `mdrlat bench train`.
 pub fn run(a: &TrainArgs) -> Result<()> {
     let variants = if a.variants.is_empty() { Variant::ALL.to_vec() } else { a.variants.clone() };
+    if !(a.seconds.is_finite() && (0.0..=3600.0).contains(&a.seconds)) {
+        anyhow::bail!("--seconds {}: must be between 0 and 3600", a.seconds);
+    }
+    if a.batch == 0 || a.batch > 4096 {
+        anyhow::bail!("--batch {}: must be 1 to 4096", a.batch);
+    }
     let time = Duration::from_secs_f64(a.seconds.max(0.05));
     let device = a.device.device();
     let backend = format!("{:?}", a.device).to_lowercase();

@@ -81,6 +81,15 @@ fn check_fresh(dir: &Path) -> Result<()> {
     ensure_dir(dir)
 }
 
+/// Writes the run's resolved `config.toml`.
+fn write_config(dir: &Path, config: &Config) -> Result<()> {
+    let resolved = toml::to_string(config).context("serialising the config")?;
+    let path = dir.join("config.toml");
+    let header = "# Resolved configuration of this run: every setting, defaults included.\n\n";
+    std::fs::write(&path, format!("{header}{resolved}"))
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
 /// Runs `mdrlat train`.
 pub fn run(a: &Args) -> Result<()> {
     let (dir, config, info, resume) = match &a.resume {
@@ -93,6 +102,8 @@ pub fn run(a: &Args) -> Result<()> {
                 toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
             if let Some(s) = a.steps {
                 config.train.total_steps = s;
+                // The run's config records how long it now runs, for later resumes.
+                write_config(dir, &config)?;
             }
             (dir.clone(), config, info, true)
         }
@@ -128,11 +139,7 @@ pub fn run(a: &Args) -> Result<()> {
     };
     if !resume {
         check_fresh(&dir)?;
-        let resolved = toml::to_string(&config).context("serialising the config")?;
-        let path = dir.join("config.toml");
-        let header = "# Resolved configuration of this run: every setting, defaults included.\n\n";
-        std::fs::write(&path, format!("{header}{resolved}"))
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        write_config(&dir, &config)?;
         let path = dir.join("run.toml");
         std::fs::write(&path, toml::to_string(&info).context("serialising run.toml")?)
             .with_context(|| format!("cannot write {}", path.display()))?;
