@@ -42,7 +42,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     }
     let time = Duration::from_secs_f64(a.seconds.max(0.05));
     let device = a.device.device();
-    let backend = format!("{:?}", a.device).to_lowercase();
+    let backend = a.device.name();
     if !a.json {
         out!(
             "learner speed on {backend} (cpu: {}, {} threads)",

@@ -8,11 +8,24 @@ use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
 use std::path::{Path, PathBuf};
 
-/// The compute device.
+/// The compute device. Backends other than `cpu` exist when the binary is built with
+/// their cargo feature (`--features wgpu`, `tch` or `cuda`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum DeviceKind {
     /// burn's pure-Rust CPU backend (flex): no set-up, the default everywhere.
     Cpu,
+    /// The first GPU through wgpu (Vulkan, Metal or DX12).
+    #[cfg(feature = "wgpu")]
+    Wgpu,
+    /// LibTorch on the CPU.
+    #[cfg(feature = "tch")]
+    Tch,
+    /// LibTorch on CUDA GPU 0.
+    #[cfg(feature = "tch")]
+    TchCuda,
+    /// CUDA GPU 0 through CubeCL.
+    #[cfg(feature = "cuda")]
+    Cuda,
 }
 
 impl DeviceKind {
@@ -20,7 +33,21 @@ impl DeviceKind {
     pub fn device(self) -> Device {
         match self {
             DeviceKind::Cpu => Device::flex(),
+            #[cfg(feature = "wgpu")]
+            DeviceKind::Wgpu => Device::wgpu(mdrlat_nn::burn::tensor::DeviceKind::DefaultDevice),
+            #[cfg(feature = "tch")]
+            DeviceKind::Tch => Device::libtorch(),
+            #[cfg(feature = "tch")]
+            DeviceKind::TchCuda => Device::libtorch_cuda(0),
+            #[cfg(feature = "cuda")]
+            DeviceKind::Cuda => Device::cuda(0),
         }
+    }
+
+    /// The name used on the command line and in `run.toml`.
+    pub fn name(self) -> String {
+        use clap::ValueEnum;
+        self.to_possible_value().map_or_else(|| format!("{self:?}").to_lowercase(), |v| v.get_name().to_string())
     }
 }
 
@@ -123,21 +150,24 @@ pub fn run(a: &Args) -> Result<()> {
             let device = a.device.unwrap_or(DeviceKind::Cpu);
             let info = RunInfo {
                 world: a.world.clone().unwrap_or_else(|| "train".into()),
-                device: format!("{device:?}").to_lowercase(),
+                device: device.name(),
                 mdrlat_version: env!("CARGO_PKG_VERSION").to_string(),
             };
             (dir, config, info, false)
         }
     };
     let world = load_world(&info.world)?;
-    let device = match info.device.as_str() {
-        "cpu" => DeviceKind::Cpu,
-        other => bail!(
-            "{}: device '{other}' is not available in this build",
-            dir.join("run.toml").display()
-        ),
-    };
-    if !resume {
+    let device = {
+        use clap::ValueEnum;
+        DeviceKind::from_str(&info.device, true).map_err(|_| {
+            anyhow::anyhow!(
+                "{}: device '{}' is not available in this build (rebuild with --features {})",
+                dir.join("run.toml").display(),
+                info.device,
+                info.device
+            )
+        })?
+    };    if !resume {
         check_fresh(&dir)?;
         write_config(&dir, &config)?;
         let path = dir.join("run.toml");
