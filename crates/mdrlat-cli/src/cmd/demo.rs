@@ -122,7 +122,7 @@ pub fn run(a: &Args) -> Result<()> {
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     out!(
-        "\nnext: mdrlat render --world office --out office.png | mdrlat observe --world train --pose 3,2,90 | mdrlat --help"
+        "\nnext: mdrlat render --world office --out office.png | mdrlat observe --world train --pose 3,2,90\n      mdrlat train --variant laser-only --steps 5000 --out runs/quick | mdrlat --help"
     );
     Ok(())
 }
