@@ -47,7 +47,8 @@ impl DeviceKind {
     /// The name used on the command line and in `run.toml`.
     pub fn name(self) -> String {
         use clap::ValueEnum;
-        self.to_possible_value().map_or_else(|| format!("{self:?}").to_lowercase(), |v| v.get_name().to_string())
+        self.to_possible_value()
+            .map_or_else(|| format!("{self:?}").to_lowercase(), |v| v.get_name().to_string())
     }
 }
 
@@ -167,7 +168,8 @@ pub fn run(a: &Args) -> Result<()> {
                 info.device
             )
         })?
-    };    if !resume {
+    };
+    if !resume {
         check_fresh(&dir)?;
         write_config(&dir, &config)?;
         let path = dir.join("run.toml");
