@@ -353,11 +353,11 @@ impl ReplayBuffer {
                 [u8::from(keep_laser), u8::from(keep_depth)]
             )));
         }
-        if slots != (capacity + frame_reserve) as u64
-            || count > cap
-            || pushed < count
-            || pushed > 1 << 62
-        {
+        // The file's own frame reserve is kept (older builds used a smaller one); it must be
+        // sane, and the length check below comes before any allocation it implies.
+        let reserve_ok = slots >= cap + 2 * FRAME_STACK as u64
+            && slots <= cap + (frame_reserve as u64).max(cap) + 1024;
+        if !reserve_ok || count > cap || pushed < count || pushed > 1 << 62 {
             return Err(io_err(format!(
                 "inconsistent replay header: {slots} slots, {count} transitions, {pushed} frames"
             )));
