@@ -41,6 +41,9 @@ pub struct Learner {
     /// The same device without autodiff, for targets and acting.
     device: Device,
     online: QNet,
+    /// `online` without autodiff, refreshed after every optimiser step: acting and the
+    /// double-DQN argmax use it, so the module is not re-mapped on every call.
+    plain: QNet,
     target: QNet,
     optim: ModuleOptimizer,
     gamma: f32,
@@ -75,12 +78,14 @@ impl Learner {
         let train_device = device.clone().autodiff();
         let online = QNetConfig::new(config.variant).init_seeded(&train_device, config.seed);
         let target = online.valid();
+        let plain = online.valid();
         let optim = AdamConfig::new().with_epsilon(config.adam_epsilon).init();
         Self {
             variant: config.variant,
             train_device,
             device,
             online,
+            plain,
             target,
             optim,
             gamma: config.gamma,
@@ -116,7 +121,7 @@ impl Learner {
     /// Q-values of the online network for a batch of observations, `[B][actions]` row-major.
     pub fn q_values(&self, inputs: &Inputs) -> Vec<f32> {
         let (l, d) = self.inputs::<false>(&inputs.laser, &inputs.depth, inputs.size);
-        let q = self.online.valid().forward(l, d, None).q;
+        let q = self.plain.forward(l, d, None).q;
         q.into_data().try_to_vec::<f32>().unwrap_or_default()
     }
 
@@ -145,7 +150,7 @@ impl Learner {
     fn targets(&self, batch: &Batch) -> Tensor<2> {
         let b = batch.size;
         let (nl, nd) = self.inputs::<false>(&batch.next_laser, &batch.next_depth, b);
-        let best_next = self.online.valid().forward(nl.clone(), nd.clone(), None).q.argmax(1); // [B, 1]
+        let best_next = self.plain.forward(nl.clone(), nd.clone(), None).q.argmax(1); // [B, 1]
         let q_next = self.target.forward(nl, nd, None).q.gather(1, best_next); // [B, 1]
         let rewards =
             Tensor::<2>::from_data(TensorData::new(batch.rewards.clone(), [b, 1]), &self.device);
@@ -199,6 +204,7 @@ impl Learner {
         // Line 15: one Adam step on the online network.
         let grads = GradientsParams::from_grads(loss.backward(), &self.online);
         self.online = self.optim.step(self.learning_rate, self.online.clone(), grads);
+        self.plain = self.online.valid();
         self.updates += 1;
         Losses { td: td_value, at: at_value, q_mean }
     }
@@ -248,6 +254,7 @@ impl Learner {
             Ok(())
         };
         read(&mut learner.online, "online.bpk")?;
+        learner.plain = learner.online.valid();
         let mut target = QNetConfig::new(config.variant).init(&learner.device);
         read(&mut target, "target.bpk")?;
         learner.target = target;
@@ -260,17 +267,17 @@ impl Learner {
 
     /// Lines 16–17: θ⁻ ← θ.
     pub fn sync_target(&mut self) {
-        self.target = self.online.valid();
+        self.target = self.plain.clone();
     }
 
     /// Forward stage times of the online network on `batch` (no autodiff), milliseconds.
     pub fn stage_times(&self, batch: &Batch) -> Vec<(&'static str, f64)> {
         let (l, d) = self.inputs::<false>(&batch.laser, &batch.depth, batch.size);
-        self.online.valid().stage_times(l, d)
+        self.plain.stage_times(l, d)
     }
 
     /// The online network without autodiff (for evaluation and export).
     pub fn policy_net(&self) -> QNet {
-        self.online.valid()
+        self.plain.clone()
     }
 }
