@@ -12,8 +12,9 @@ pub mod rng;
 
 pub use action::{Action, TABLE_1, Velocity};
 pub use obs::{
-    DEPTH_COLS, DEPTH_LEN, DEPTH_ROWS, FRAME_STACK, FrameStack, LASER_BEAMS, ODOM_HISTORY,
-    normalize_depth, normalize_laser,
+    DEPTH_COLS, DEPTH_HFOV_DEG, DEPTH_LEN, DEPTH_MIN_RANGE_M, DEPTH_ROWS, DEPTH_VFOV_DEG,
+    FRAME_STACK, FrameStack, LASER_BEAMS, LASER_FOV_DEG, LASER_MAX_RANGE_M, ODOM_HISTORY,
+    laser_beam_angle, normalize_depth, normalize_laser,
 };
 pub use rng::Rng;
 

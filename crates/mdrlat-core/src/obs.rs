@@ -24,6 +24,23 @@ pub const LASER_NORM_M: f32 = 5.6;
 pub const DEPTH_CLAMP_M: f32 = 10.0;
 /// Depth is divided by this after clamping.
 pub const DEPTH_NORM_M: f32 = 5.0;
+/// The laser's field of view (SPEC §2): beam `i` of [`LASER_BEAMS`] points at
+/// `−135° + i·270°/511`, counter-clockwise from ahead.
+pub const LASER_FOV_DEG: f32 = 270.0;
+/// The laser's maximum range (SPEC §2); farther or missing returns read this.
+pub const LASER_MAX_RANGE_M: f32 = 5.6;
+/// The depth camera's minimum range (SPEC §2, as the Kinect): closer reads 0.
+pub const DEPTH_MIN_RANGE_M: f32 = 0.4;
+/// The depth camera's horizontal field of view (SPEC §2).
+pub const DEPTH_HFOV_DEG: f32 = 58.0;
+/// The depth camera's vertical field of view (SPEC §2).
+pub const DEPTH_VFOV_DEG: f32 = 45.0;
+
+/// The angle of laser beam `i` of [`LASER_BEAMS`], radians, counter-clockwise from ahead.
+pub fn laser_beam_angle(i: usize) -> f32 {
+    let fov = LASER_FOV_DEG.to_radians();
+    -fov / 2.0 + fov * i as f32 / (LASER_BEAMS - 1) as f32
+}
 
 /// Normalises laser ranges in metres into `out` (SPEC §2: range / 5.6).
 /// Non-finite ranges (which a sane source never gives) map to 1.0, "nothing seen".

@@ -84,7 +84,12 @@ pub struct LaserConfig {
 
 impl Default for LaserConfig {
     fn default() -> Self {
-        Self { fov_deg: 270.0, height_m: 0.40, max_range_m: 5.6, noise_std_m: 0.0 }
+        Self {
+            fov_deg: mdrlat_core::LASER_FOV_DEG,
+            height_m: 0.40,
+            max_range_m: mdrlat_core::LASER_MAX_RANGE_M,
+            noise_std_m: 0.0,
+        }
     }
 }
 
@@ -111,10 +116,10 @@ pub struct DepthConfig {
 impl Default for DepthConfig {
     fn default() -> Self {
         Self {
-            hfov_deg: 58.0,
-            vfov_deg: 45.0,
+            hfov_deg: mdrlat_core::DEPTH_HFOV_DEG,
+            vfov_deg: mdrlat_core::DEPTH_VFOV_DEG,
             height_m: 0.30,
-            min_range_m: 0.4,
+            min_range_m: mdrlat_core::DEPTH_MIN_RANGE_M,
             max_range_m: 10.0,
             noise_std_at_1m: 0.0,
             dropout_prob: 0.0,
