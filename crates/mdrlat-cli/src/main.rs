@@ -53,6 +53,12 @@ enum Command {
     Train(cmd::train::Args),
     /// Draws smoothed training curves of runs (paper Fig. 4) as a PNG.
     Plot(cmd::plot::Args),
+    /// Drives a robot with a trained policy as a ROS 1 node: laser, depth and odometry in,
+    /// velocity commands out at 5 Hz, zero velocity whenever a sensor is stale or malformed.
+    Ros(cmd::ros::Args),
+    /// Runs the simulator as a ROS 1 robot (turtlebot2 with RPLIDAR and Kinect): publishes
+    /// laser, depth and odometry, moves from /cmd_vel.
+    RosSim(cmd::ros::SimArgs),
     /// Measures performance.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -115,6 +121,8 @@ fn main() -> ExitCode {
         Command::Rollout(a) => cmd::rollout::run(&a),
         Command::Train(a) => cmd::train::run(&a),
         Command::Plot(a) => cmd::plot::run(&a),
+        Command::Ros(a) => cmd::ros::run(&a),
+        Command::RosSim(a) => cmd::ros::sim(&a),
         Command::Bench(BenchCommand::Sim(a)) => cmd::bench::sim(&a),
         Command::Bench(BenchCommand::Train(a)) => cmd::bench_train::run(&a),
         Command::Config(ConfigCommand::Default) => {

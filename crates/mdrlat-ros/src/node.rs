@@ -488,7 +488,7 @@ impl SubscriberLink {
         if let Err(e) = self.receive()
             && self.node.upgrade().is_some_and(|n| !n.closed.load(Ordering::SeqCst))
         {
-            eprintln!("[{}] {} from {}: {e}", self.callerid, self.topic, self.publisher);
+            eprintln!("[{}] {}: {e}", self.callerid, self.topic);
         }
         lock(&self.connected).retain(|u| u != &self.publisher);
     }
@@ -503,7 +503,7 @@ impl SubscriberLink {
                 Value::Array(vec![Value::Array(vec![Value::str("TCPROS")])]),
             ],
         )
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| format!("publisher {e}"))?;
         let (host, port) = match answer.as_array() {
             Some([code, _, Value::Array(p)]) if code.as_int() == Some(1) => match p.as_slice() {
                 [proto, host, port] if proto.as_str() == Some("TCPROS") => (

@@ -154,6 +154,7 @@ pub fn run(
     if config.controller.require_odom {
         inputs.push(config.odom_topic.as_str());
     }
+    let limits = lock(&shared.controller).config().clone();
     log(&format!(
         "{} on {}: {} -> {} at {} Hz ({:?}), limits {:.2} m/s {:.2} rad/s, stale after {:.2} s",
         node.name(),
@@ -162,9 +163,9 @@ pub fn run(
         config.cmd_topic,
         config.rate_hz,
         config.trigger,
-        lock(&shared.controller).config().max_linear_mps,
-        lock(&shared.controller).config().max_angular_radps,
-        config.controller.stale_after.as_secs_f32(),
+        limits.max_linear_mps,
+        limits.max_angular_radps,
+        limits.stale_after.as_secs_f32(),
     ));
     let mut csv = match &config.log_csv {
         Some(path) => {

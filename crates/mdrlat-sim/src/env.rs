@@ -374,10 +374,18 @@ impl Env {
     /// # Errors
     /// [`SimError::NeedsReset`] before the first reset or after the episode ended.
     pub fn step(&mut self, action: Action) -> Result<Step<'_>, SimError> {
+        self.step_command(action.command())
+    }
+
+    /// Applies an arbitrary velocity command for one control period, as a robot base does
+    /// with `/cmd_vel` (`mdrlat ros-sim`); the acceleration limits still apply.
+    ///
+    /// # Errors
+    /// [`SimError::NeedsReset`] before the first reset or after the episode ended.
+    pub fn step_command(&mut self, command: Velocity) -> Result<Step<'_>, SimError> {
         if !self.running {
             return Err(SimError::NeedsReset);
         }
-        let command = action.command();
         let sub_dt = self.config.dt_s / self.config.substeps as f32;
         let mut collision = None;
         for _ in 0..self.config.substeps {

@@ -70,6 +70,36 @@ fn tensor4(data: &[f32], b: usize, device: &Device) -> Tensor<4> {
     mdrlat_nn::depth_patches(data, b, DEPTH_ROWS, DEPTH_COLS, device)
 }
 
+/// The index of the largest value (the first on ties; 0 for an empty row or all NaN).
+pub fn argmax(row: &[f32]) -> usize {
+    row.iter()
+        .enumerate()
+        .fold((0, f32::NEG_INFINITY), |best, (i, &v)| if v > best.1 { (i, v) } else { best })
+        .0
+}
+
+/// Loads burnpack weights at `path` into `net`, which must be a `variant` network.
+///
+/// # Errors
+/// A missing, truncated or foreign file, or weights of another variant.
+pub fn read_net(net: &mut QNet, path: &Path, variant: Variant) -> Result<(), String> {
+    if !path.is_file() {
+        return Err(format!("{}: missing", path.display()));
+    }
+    let mut store = BurnpackStore::from_file(path).auto_extension(false);
+    let r = net.load_from(&mut store).map_err(|e| format!("{}: {e}", path.display()))?;
+    if !r.errors.is_empty() || !r.missing.is_empty() || !r.unused.is_empty() {
+        return Err(format!(
+            "{}: does not fit a {variant} network ({} errors, {} missing, {} unexpected tensors)",
+            path.display(),
+            r.errors.len(),
+            r.missing.len(),
+            r.unused.len()
+        ));
+    }
+    Ok(())
+}
+
 impl Learner {
     /// A fresh learner: the network is initialised from `seed` on `device`, the target is a
     /// copy (Algorithm 1, line 1).
@@ -129,17 +159,7 @@ impl Learner {
     pub fn greedy(&self, inputs: &Inputs) -> Vec<usize> {
         let q = self.q_values(inputs);
         let actions = q.len() / inputs.size.max(1);
-        q.chunks(actions.max(1))
-            .map(|row| {
-                row.iter()
-                    .enumerate()
-                    .fold(
-                        (0, f32::NEG_INFINITY),
-                        |best, (i, &v)| if v > best.1 { (i, v) } else { best },
-                    )
-                    .0
-            })
-            .collect()
+        q.chunks(actions.max(1)).map(argmax).collect()
     }
 
     /// Algorithm 1, lines 7–11, eq. (10): `y = r + γ (1 − terminated) Q⁻(s', argmax_a' Q(s', a'))`.
@@ -234,25 +254,7 @@ impl Learner {
         updates: u64,
     ) -> Result<Self, String> {
         let mut learner = Learner::new(config, device);
-        let read = |net: &mut QNet, name: &str| -> Result<(), String> {
-            let path = dir.join(name);
-            if !path.is_file() {
-                return Err(format!("{}: missing", path.display()));
-            }
-            let mut store = BurnpackStore::from_file(&path).auto_extension(false);
-            let r = net.load_from(&mut store).map_err(|e| format!("{}: {e}", path.display()))?;
-            if !r.errors.is_empty() || !r.missing.is_empty() || !r.unused.is_empty() {
-                return Err(format!(
-                    "{}: does not fit a {} network ({} errors, {} missing, {} unexpected tensors)",
-                    path.display(),
-                    config.variant,
-                    r.errors.len(),
-                    r.missing.len(),
-                    r.unused.len()
-                ));
-            }
-            Ok(())
-        };
+        let read = |net: &mut QNet, name: &str| read_net(net, &dir.join(name), config.variant);
         read(&mut learner.online, "online.bpk")?;
         learner.plain = learner.online.valid();
         let mut target = QNetConfig::new(config.variant).init(&learner.device);

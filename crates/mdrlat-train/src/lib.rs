@@ -8,11 +8,13 @@ pub mod checkpoint;
 pub mod config;
 pub mod export;
 pub mod learner;
+pub mod policy;
 pub mod replay;
 pub mod tensorboard;
 pub mod train;
 
 pub use config::{TrainConfig, TrainConfigError};
 pub use learner::{Inputs, Learner, Losses};
+pub use policy::GreedyPolicy;
 pub use replay::{Batch, ReplayBuffer, Transition};
 pub use train::{Evaluation, Status, TrainError, TrainReport, evaluate, observation_inputs, train};

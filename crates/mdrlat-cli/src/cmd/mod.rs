@@ -7,6 +7,7 @@ pub mod observe;
 pub mod plot;
 pub mod render;
 pub mod rollout;
+pub mod ros;
 pub mod train;
 pub mod worlds;
 
