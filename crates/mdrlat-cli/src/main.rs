@@ -84,6 +84,9 @@ enum BenchCommand {
     /// Gradient-step time (batch 32) per variant, single-decision inference latency and
     /// replay memory.
     Train(cmd::bench_train::TrainArgs),
+    /// Scan-in to Twist-out latency of `mdrlat ros` over a running ROS master (p50/p99),
+    /// and inference time per decision on one core.
+    Ros(cmd::bench_ros::RosArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -125,6 +128,7 @@ fn main() -> ExitCode {
         Command::RosSim(a) => cmd::ros::sim(&a),
         Command::Bench(BenchCommand::Sim(a)) => cmd::bench::sim(&a),
         Command::Bench(BenchCommand::Train(a)) => cmd::bench_train::run(&a),
+        Command::Bench(BenchCommand::Ros(a)) => cmd::bench_ros::run(&a),
         Command::Config(ConfigCommand::Default) => {
             out!("{}", config::DEFAULT_TOML.trim_end());
             Ok(())

@@ -261,6 +261,13 @@ fn policy_drives_the_simulator_over_ros() {
             .spawn()
             .unwrap(),
     );
+    let listen = master
+        .command(PYTHON)
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros/listen.py"))
+        .arg("4")
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
     let mut node = Guard(
         master
             .command(BIN)
@@ -270,6 +277,19 @@ fn policy_drives_the_simulator_over_ros() {
             .spawn()
             .unwrap(),
     );
+    let heard = listen.wait_with_output().unwrap();
+    let heard: serde_json::Value = serde_json::from_slice(&heard.stdout)
+        .expect("listen.py JSON (did rospy accept our types?)");
+    // rospy decoded the simulator's topics: 5 Hz for ~4 s, the simulator's geometry.
+    for topic in ["scan", "depth", "odom"] {
+        assert!(heard[topic]["count"].as_u64().unwrap() >= 10, "{heard}");
+    }
+    assert_eq!(heard["scan"]["last"]["n"], 512);
+    assert!((heard["scan"]["last"]["angle_max"].as_f64().unwrap() - 2.356).abs() < 1e-3);
+    assert_eq!(heard["depth"]["last"]["h"], 128);
+    assert_eq!(heard["depth"]["last"]["w"], 160);
+    assert_eq!(heard["depth"]["last"]["bytes"], 128 * 640);
+    assert_eq!(heard["odom"]["last"]["child"], "base_footprint");
     let status = wait_exit(&mut sim.0, Duration::from_secs(30));
     assert!(status.success(), "ros-sim: {status}");
     let mut summary = String::new();
@@ -299,6 +319,31 @@ fn policy_drives_the_simulator_over_ros() {
     assert!(std::fs::metadata(dir.join("sim.png")).unwrap().len() > 1000);
     assert!(log.contains("all sensors valid and fresh: driving"), "{log}");
     let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn bench_ros_reports_latency_as_json() {
+    if !ros_available() {
+        return;
+    }
+    let master = Master::start();
+    let out = master
+        .command(BIN)
+        .args(["bench", "ros", "--variant", "laser-only", "--samples", "10", "--json"])
+        .arg("--rate-hz")
+        .arg("20")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    let lines: Vec<serde_json::Value> =
+        text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines[0]["bench"], "ros");
+    assert_eq!(lines[0]["samples"], 10);
+    let (p50, p99) = (lines[0]["p50_ms"].as_f64().unwrap(), lines[0]["p99_ms"].as_f64().unwrap());
+    assert!(0.0 < p50 && p50 <= p99 && p99 < 1000.0, "{text}");
+    assert_eq!(lines[1]["bench"], "infer");
+    assert_eq!(lines[1]["threads"], 1);
 }
 
 #[test]

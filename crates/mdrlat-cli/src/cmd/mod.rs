@@ -1,6 +1,7 @@
 //! One module per subcommand, plus the glue they share.
 
 pub mod bench;
+pub mod bench_ros;
 pub mod bench_train;
 pub mod demo;
 pub mod observe;

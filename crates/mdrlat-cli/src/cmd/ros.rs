@@ -144,7 +144,7 @@ pub fn stop_flag() -> Result<Arc<AtomicBool>> {
 }
 
 /// The deployed policy behind the node's [`mdrlat_ros::Policy`] trait.
-struct Deployed(GreedyPolicy);
+pub struct Deployed(pub GreedyPolicy);
 
 impl mdrlat_ros::Policy for Deployed {
     fn uses_laser(&self) -> bool {
