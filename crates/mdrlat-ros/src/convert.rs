@@ -21,8 +21,11 @@ pub enum NonFinite {
 }
 
 /// How scans are read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ScanOptions {
+    /// The laser frame's yaw on the robot, radians (π for a laser mounted backwards): beam
+    /// angles are turned by it so that 0 is the robot's heading, as in the simulator.
+    pub yaw_offset: f32,
     /// Non-finite ranges.
     pub non_finite: NonFinite,
     /// Beams of the 270° fan that the scan does not cover read the maximum range instead of
@@ -130,7 +133,8 @@ pub fn resample_scan(
     }
     // Beam angles ascending: a clockwise scanner (negative increment) is read backwards.
     let step = inc.abs().max(f32::MIN_POSITIVE);
-    let first = if inc >= 0.0 { scan.angle_min } else { scan.angle_min + inc * (n - 1) as f32 };
+    let first = options.yaw_offset
+        + if inc >= 0.0 { scan.angle_min } else { scan.angle_min + inc * (n - 1) as f32 };
     if inc < 0.0 {
         ranges.reverse();
     }
@@ -372,6 +376,11 @@ mod tests {
         let mut out2 = [0.0; 512];
         assert_eq!(resample_scan(&s, ScanOptions::default(), &mut out2), Ok(()));
         assert_eq!(out2, out);
+        // A laser mounted backwards: its +90° beam looks at the robot's −90°.
+        let back = ScanOptions { yaw_offset: PI, ..ScanOptions::default() };
+        let s = scan(0.0, PI / 180.0, ranges);
+        assert_eq!(resample_scan(&s, back, &mut out2), Ok(()));
+        assert_eq!(out2[511 - left.unwrap_or(0)], 1.0);
     }
 
     /// A fine scan: the minimum in each bin survives resampling.

@@ -181,6 +181,9 @@ pub fn run(
     let mut next = start;
     let mut seen_scans = 0;
     let mut last_decision: Option<Instant> = None;
+    let mut last_tick: Option<Instant> = None;
+    // In scan-triggered mode, a tick without a new scan comes only once the laser is stale.
+    let watchdog = period.max(config.controller.stale_after + Duration::from_millis(10));
     let mut summary = RunSummary::default();
     while !stop.load(Ordering::SeqCst) && !node.shutdown_requested() {
         // Wait for this tick's moment.
@@ -200,20 +203,31 @@ pub fn run(
                 let scans = lock(&shared.scans);
                 let (scans, _) = shared
                     .scan_arrived
-                    .wait_timeout_while(scans, Duration::from_millis(50), |n| *n == seen_scans)
+                    .wait_timeout_while(scans, Duration::from_millis(20), |n| *n == seen_scans)
                     .unwrap_or_else(std::sync::PoisonError::into_inner);
-                let fresh = *scans != seen_scans;
+                let (count, fresh) = (*scans, *scans != seen_scans);
+                drop(scans);
                 let now = Instant::now();
-                let due = last_decision.is_none_or(|t| now - t >= period.mul_f32(0.75));
-                let watchdog = last_decision.is_none_or(|t| now - t >= period);
-                if !(watchdog || fresh && due) {
+                let due_at = last_decision.map(|t| t + period.mul_f32(0.75));
+                if fresh && due_at.is_none_or(|d| now >= d) {
+                    seen_scans = count;
+                    last_decision = Some(now);
+                } else if last_tick.is_none_or(|t| now - t >= watchdog) {
+                    // No scan for a while: tick anyway, so that a stale laser is reported
+                    // and zero velocity keeps flowing. A watchdog tick does not delay the
+                    // next scan's decision.
+                } else {
+                    if fresh && let Some(d) = due_at {
+                        std::thread::sleep(
+                            d.saturating_duration_since(now).min(Duration::from_millis(20)),
+                        );
+                    }
                     continue;
                 }
-                seen_scans = *scans;
-                last_decision = Some(now);
             }
         }
         let now = Instant::now();
+        last_tick = Some(now);
         let (command, lines) = lock(&shared.controller).tick(now, policy.as_mut());
         publish(&cmd, command);
         summary.ticks += 1;

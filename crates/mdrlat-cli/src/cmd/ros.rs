@@ -117,6 +117,10 @@ pub struct Args {
     /// Non-finite laser ranges.
     #[arg(long, value_enum, default_value = "reject")]
     pub scan_inf: ScanInf,
+    /// The laser's yaw on the robot, degrees (180 for a laser mounted backwards, as RPLIDARs
+    /// often are): beam angles are turned by it so that 0° is the robot's heading.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub scan_yaw_deg: f32,
     /// Read the part of the 270° fan a scan does not cover as free space instead of refusing
     /// the scan. Dangerous: only for lasers that cannot see behind the robot's sides.
     #[arg(long)]
@@ -175,6 +179,9 @@ fn node_config(a: &Args) -> Result<NodeConfig> {
     if !(a.stale_after_s.is_finite() && a.stale_after_s > 0.0) {
         bail!("--stale-after-s {}: expected a positive number of seconds", a.stale_after_s);
     }
+    if !a.scan_yaw_deg.is_finite() {
+        bail!("--scan-yaw-deg {}: expected a number of degrees", a.scan_yaw_deg);
+    }
     for (flag, v) in [("--max-linear", a.max_linear), ("--max-angular", a.max_angular)] {
         if !(v.is_finite() && v >= 0.0) {
             bail!("{flag} {v}: expected a non-negative number");
@@ -199,6 +206,7 @@ fn node_config(a: &Args) -> Result<NodeConfig> {
             max_linear_mps: a.max_linear,
             max_angular_radps: a.max_angular,
             scan: ScanOptions {
+                yaw_offset: a.scan_yaw_deg.to_radians(),
                 non_finite: match a.scan_inf {
                     ScanInf::Reject => NonFinite::Reject,
                     ScanInf::Rep117 => NonFinite::Rep117,
@@ -286,7 +294,7 @@ pub struct SimArgs {
     /// Write the trajectory (one row per step) to this CSV file.
     #[arg(long)]
     pub log: Option<PathBuf>,
-    /// Draw the last episode from above with its trail into this PNG at exit.
+    /// Draw the longest episode from above with its trail into this PNG at exit.
     #[arg(long)]
     pub picture: Option<PathBuf>,
 }
@@ -358,6 +366,9 @@ pub fn sim(a: &SimArgs) -> Result<()> {
     let start = Instant::now();
     let mut seq = 0u32;
     let mut trail: Vec<Vec2> = vec![env.pose().position()];
+    // The longest finished episode's picture (steps, image), for --picture.
+    let mut best = (0u32, None);
+    let scale = px_per_m(env.world(), 640.0);
     let (mut steps, mut collisions, mut distance) = (0u64, 0u64, 0f64);
     publish_sensors(
         &env,
@@ -427,6 +438,16 @@ pub fn sim(a: &SimArgs) -> Result<()> {
                     info.step
                 );
             }
+            if a.picture.is_some() && info.step >= best.0 {
+                let caption = format!(
+                    "ros-sim {}: episode {episode}, {} steps{}",
+                    env.world().name,
+                    info.step,
+                    if info.collision.is_some() { ", collision" } else { "" }
+                );
+                let image = snapshot(&env, &trail, &caption, info.collision.is_some(), scale);
+                best = (info.step, Some(image));
+            }
             trail.clear();
             episode += 1;
             env.reset_stream(a.seed, episode)?;
@@ -446,9 +467,18 @@ pub fn sim(a: &SimArgs) -> Result<()> {
         f.flush().with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(p) = &a.picture {
-        let scale = px_per_m(env.world(), 640.0);
-        let caption = format!("ros-sim {} episode {episode}", env.world().name);
-        snapshot(&env, &trail, &caption, false, scale).save_png(p)?;
+        let running = env.episode_steps();
+        let image = match best {
+            (steps, Some(image)) if steps >= running => image,
+            _ => {
+                let caption = format!(
+                    "ros-sim {}: episode {episode}, {running} steps (running)",
+                    env.world().name
+                );
+                snapshot(&env, &trail, &caption, false, scale)
+            }
+        };
+        image.save_png(p)?;
     }
     let malformed = last.lock().map(|l| l.malformed).unwrap_or(0);
     out!(
