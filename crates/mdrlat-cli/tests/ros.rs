@@ -220,7 +220,8 @@ fn node_rate_watchdog_malformed_messages_and_sigterm() {
         }
     }
     // SIGTERM: driving right before it, a zero after it, and the zero is the last word.
-    assert!(within(sigterm_at - 0.5, sigterm_at).iter().all(moving), "driving before SIGTERM");
+    let before = within(sigterm_at - 0.5, sigterm_at);
+    assert!(before.len() >= 2 && before.iter().all(moving), "driving before SIGTERM: {before:?}");
     let last = twists.last().unwrap();
     assert!(last.0 >= sigterm_at && !moving(last), "last twist {last:?}, SIGTERM at {sigterm_at}");
     // One log line per incident, not per tick: each malformed kind logged once.
@@ -294,7 +295,7 @@ fn policy_drives_the_simulator_over_ros() {
     assert!(status.success(), "ros-sim: {status}");
     let mut summary = String::new();
     std::io::Read::read_to_string(sim.0.stdout.as_mut().unwrap(), &mut summary).unwrap();
-    kill("TERM", i64::from(node.0.id()));
+    kill("INT", i64::from(node.0.id())); // Ctrl-C
     let node_status = wait_exit(&mut node.0, Duration::from_secs(5));
     let mut log = String::new();
     std::io::Read::read_to_string(node.0.stderr.as_mut().unwrap(), &mut log).unwrap();

@@ -332,7 +332,21 @@ impl Controller {
             if self.uses_depth {
                 self.depth_stack.write_stacked(&mut self.depth_input, normalize_depth);
             }
-            match policy.decide(&self.laser_input, &self.depth_input) {
+            let started = Instant::now();
+            let (laser, depth) = (&self.laser_input, &self.depth_input);
+            // A panicking backend is an inference error, not a dead node.
+            let decided = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                policy.decide(laser, depth)
+            }))
+            .unwrap_or_else(|panic| {
+                let what = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| (*s).to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_default();
+                Err(format!("the policy panicked: {what}"))
+            });
+            match decided {
                 Ok(a) => {
                     action = Some(a);
                     self.inference_error = None;
@@ -341,6 +355,11 @@ impl Controller {
                     self.inference_error = Some(e);
                     stops.push(Stop::Inference);
                 }
+            }
+            // A slow decision may have outlived its inputs' freshness.
+            let after = now + started.elapsed();
+            if action.is_some() {
+                stops.extend(self.sensor_stops(after));
             }
         } else {
             // Frames from before a stop must not mix with frames after it.
@@ -398,6 +417,7 @@ mod tests {
         }
         fn decide(&mut self, laser: &[f32], depth: &[f32]) -> Result<Action, String> {
             self.seen.push((laser.to_vec(), depth.to_vec()));
+            assert!(self.action < 10, "out of actions");
             if self.fail {
                 Err("backend lost".into())
             } else {
@@ -481,11 +501,11 @@ mod tests {
         assert!(c.tick(t0, &mut p).0.action.is_some());
         let mut lines = Vec::new();
         for k in 1..20 {
-            let t = t0 + Duration::from_millis(100 * k);
+            let t = t0 + Duration::from_millis(120 * k);
             c.on_scan(t, Ok(&scan(2.0))); // the laser keeps coming, the camera died
             c.on_odom(t, Ok(&Odometry::default()));
             let (cmd, logs) = c.tick(t, &mut p);
-            if k > 5 {
+            if k > 4 {
                 assert_eq!(cmd.velocity, Velocity::default(), "tick {k}");
             } else {
                 assert!(cmd.action.is_some(), "tick {k}");
@@ -552,5 +572,12 @@ mod tests {
         let (cmd, _) = c.tick(t0, &mut p);
         assert_eq!(cmd.velocity.v, 0.3, "0.5 m/s clamped to the flag's 0.3");
         assert_eq!(cmd.velocity.w, -std::f32::consts::PI / 12.0);
+        // A panicking policy: zero velocity and a log line, and the controller lives on.
+        p.action = 99;
+        let (cmd, logs) = c.tick(t0, &mut p);
+        assert_eq!(cmd.velocity, Velocity::default());
+        assert!(logs.iter().any(|l| l.contains("panicked: out of actions")), "{logs:?}");
+        p.action = 1;
+        assert!(c.tick(t0, &mut p).0.action.is_some());
     }
 }

@@ -6,8 +6,14 @@ use crate::msg::{Image, LaserScan};
 use mdrlat_core::{
     DEPTH_COLS, DEPTH_MIN_RANGE_M, DEPTH_ROWS, LASER_BEAMS, LASER_MAX_RANGE_M, laser_beam_angle,
 };
-use std::f32::consts::TAU;
+use std::f32::consts::{PI, TAU};
 use thiserror::Error;
+
+/// The smallest beam spacing accepted, radians.
+const MIN_INCREMENT: f32 = 1e-6 * TAU;
+/// A blind sector up to this wide (radians) between a scan's last and first beam is bridged
+/// by the nearest beams: 360° scanners leave a fraction of a degree uncovered.
+const MAX_BRIDGED_GAP: f32 = 2.0 * std::f32::consts::PI / 180.0;
 
 /// What to do with non-finite ranges in a scan.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -103,7 +109,9 @@ pub fn resample_scan(
         return Err(ScanError::Empty);
     }
     let inc = scan.angle_increment;
-    if !scan.angle_min.is_finite() || !inc.is_finite() || (n > 1 && inc == 0.0) {
+    // A usable fan: at least two beams, finite angles, an increment above 0.0001° (a
+    // degenerate increment would make one output bin span billions of source beams).
+    if n < 2 || !scan.angle_min.is_finite() || !inc.is_finite() || inc.abs() < MIN_INCREMENT {
         return Err(ScanError::Geometry { angle_min: scan.angle_min, angle_increment: inc });
     }
     let cap = if scan.range_max.is_finite() && scan.range_max > 0.0 {
@@ -132,37 +140,42 @@ pub fn resample_scan(
         return Err(ScanError::NonFinite { count, index, value });
     }
     // Beam angles ascending: a clockwise scanner (negative increment) is read backwards.
-    let step = inc.abs().max(f32::MIN_POSITIVE);
+    let step = inc.abs();
     let first = options.yaw_offset
         + if inc >= 0.0 { scan.angle_min } else { scan.angle_min + inc * (n - 1) as f32 };
     if inc < 0.0 {
         ranges.reverse();
     }
-    let full_circle = n as f32 * step >= TAU - step * 0.5;
+    let turn = TAU / step; // source beams in a full turn
+    let last = (n - 1) as f32;
+    // Every angle is measured from the first beam, counter-clockwise, in [0, 2π): a scan
+    // that starts anywhere (0..2π, −π..π, turned by the mounting yaw) is read the same.
+    let full_circle = TAU - n as f32 * step <= MAX_BRIDGED_GAP;
     let bin = (mdrlat_core::LASER_FOV_DEG.to_radians() / (LASER_BEAMS - 1) as f32) / 2.0;
     let half = bin / step; // half a target bin, in source beams
     let mut missing = 0;
     for (k, o) in out.iter_mut().enumerate() {
-        let mut offset = laser_beam_angle(k) - first;
-        if full_circle {
-            offset = offset.rem_euclid(TAU);
-        }
-        let p = offset / step;
-        let last = (n - 1) as f32;
-        if !full_circle && (p < -0.5 || p > last + 0.5) {
+        let p0 = (laser_beam_angle(k) - first).rem_euclid(TAU) / step;
+        let p = if p0 <= last + 0.5 {
+            p0
+        } else if turn - p0 <= 0.5 || (full_circle && turn - p0 < p0 - last) {
+            p0 - turn // just before the first beam
+        } else if full_circle {
+            p0 // in a bridged gap, nearer the last beam
+        } else {
             missing += 1;
             *o = LASER_MAX_RANGE_M;
             continue;
-        }
+        };
         // Source beams whose angle falls in this beam's bin [θ − bin/2, θ + bin/2); with
-        // a coarser source the bin may hold none: take the nearest.
+        // a coarser source the bin may hold none: take the nearest. Never more than n.
         let lo = (p - half).ceil() as i64;
-        let hi = ((p + half).ceil() as i64 - 1).max(lo);
-        let (lo, hi) = if (p + half).ceil() as i64 - 1 < lo {
+        let hi = (p + half).ceil() as i64 - 1;
+        let (lo, hi) = if hi < lo {
             let nearest = p.round() as i64;
             (nearest, nearest)
         } else {
-            (lo, hi)
+            (lo, hi.min(lo + n as i64 - 1))
         };
         let mut best = f32::INFINITY;
         for j in lo..=hi {
@@ -176,10 +189,10 @@ pub fn resample_scan(
         *o = best;
     }
     if missing > 0 && !options.fill_gaps {
-        let last = first + step * (n - 1) as f32;
+        let from = (first + PI).rem_euclid(TAU) - PI;
         return Err(ScanError::Coverage {
-            from_deg: first.to_degrees(),
-            to_deg: last.to_degrees(),
+            from_deg: from.to_degrees(),
+            to_deg: (from + step * last).to_degrees(),
             missing,
         });
     }
@@ -344,7 +357,7 @@ mod tests {
         let ranges: Vec<f32> = (0..512).map(|i| 0.5 + i as f32 * 0.01).collect();
         let s = scan(-fov / 2.0, fov / 511.0, ranges.clone());
         let mut out = [0.0; 512];
-        resample_scan(&s, ScanOptions::default(), &mut out).ok();
+        assert_eq!(resample_scan(&s, ScanOptions::default(), &mut out), Ok(()));
         for (i, (&a, &b)) in out.iter().zip(&ranges).enumerate() {
             assert!((a - b.min(5.6)).abs() < 1e-6, "beam {i}: {a} vs {b}");
         }
@@ -395,6 +408,48 @@ mod tests {
         assert_eq!(resample_scan(&s, ScanOptions::default(), &mut out), Ok(()));
         assert_eq!(out.iter().filter(|&&r| r == 0.9).count(), 1);
         assert!(out.iter().all(|&r| r == 4.0 || r == 0.9));
+    }
+
+    /// rplidar_ros without angle compensation: −179.4°…179.7° in 1,450 beams, mounted
+    /// backwards. Its blind 0.9° is bridged; every robot-frame beam reads what it sees.
+    #[test]
+    fn nearly_full_scans_mounted_backwards() {
+        let n = 1450;
+        let inc = 2.0 * PI / 1455.0;
+        let mut ranges = vec![3.0; n];
+        // The laser's own −90° (its right) is the robot's +90° when mounted backwards.
+        let right = ((-PI / 2.0 - (-179.4f32).to_radians()) / inc).round() as usize;
+        ranges[right] = 1.0;
+        let s = scan((-179.4f32).to_radians(), inc, ranges);
+        let back = ScanOptions { yaw_offset: PI, ..ScanOptions::default() };
+        let mut out = [0.0; 512];
+        assert_eq!(resample_scan(&s, back, &mut out), Ok(()));
+        let hits: Vec<usize> = (0..512).filter(|&k| out[k] == 1.0).collect();
+        assert_eq!(hits.len(), 1, "{hits:?}");
+        assert!((laser_beam_angle(hits[0]) - PI / 2.0).abs() < 0.01);
+        assert!(out.iter().all(|&r| r == 1.0 || r == 3.0));
+        // A 90° blind sector is not bridged.
+        let s = scan(0.0, PI / 180.0, vec![2.0; 270]);
+        let e = resample_scan(&s, back, &mut out);
+        assert!(matches!(e, Err(ScanError::Coverage { .. })), "{e:?}");
+    }
+
+    #[test]
+    fn degenerate_fans_are_errors() {
+        let mut out = [0.0; 512];
+        for s in [
+            scan(0.0, 1e-30, vec![1.0; 1000]),
+            scan(0.0, f32::MIN_POSITIVE, vec![1.0; 3]),
+            scan(0.0, 0.01, vec![1.0]),
+            scan(f32::NAN, 0.01, vec![1.0; 10]),
+        ] {
+            let e = resample_scan(
+                &s,
+                ScanOptions { fill_gaps: true, ..ScanOptions::default() },
+                &mut out,
+            );
+            assert!(matches!(e, Err(ScanError::Geometry { .. })), "{e:?}");
+        }
     }
 
     #[test]

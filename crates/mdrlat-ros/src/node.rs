@@ -8,20 +8,21 @@
 
 use crate::msg::{self, Message, WireError};
 use crate::xmlrpc::{self, Value, XmlRpcError};
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::io::{Read, Write};
 use std::marker::PhantomData;
-use std::net::{TcpListener, TcpStream, ToSocketAddrs};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
-use std::sync::{Arc, Mutex, Weak};
+use std::net::{TcpListener, TcpStream};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex, Weak};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
 /// Messages larger than this are refused (a 1080p 32-bit image is 8 MB).
 const MAX_MESSAGE_BYTES: usize = 64 << 20;
-/// Messages queued per subscriber connection before old ones are dropped.
+/// Messages queued per subscriber connection; beyond it the oldest is dropped.
 const QUEUE: usize = 4;
+/// A subscriber link that brings nothing for this long is reconnected.
+const SILENT_LINK: Duration = Duration::from_secs(10);
 
 /// A node that cannot start or register.
 #[derive(Debug, Error)]
@@ -45,6 +46,9 @@ pub enum RosError {
         /// Its status message.
         message: String,
     },
+    /// The node's configuration cannot work.
+    #[error("{0}")]
+    Config(String),
     /// A file (the CSV log) cannot be written.
     #[error("{}: {source}", path.display())]
     File {
@@ -100,15 +104,25 @@ struct Subscription {
     ty: &'static str,
     md5: String,
     callback: Callback,
-    /// Publisher APIs with a live connection.
+    /// Publisher APIs the master lists now (the last `publisherUpdate`).
+    listed: Arc<Mutex<Vec<String>>>,
+    /// Publisher APIs with a link thread.
     connected: Arc<Mutex<Vec<String>>>,
 }
 
-/// One subscriber connection of a publication.
-struct Link {
-    tx: SyncSender<Arc<Vec<u8>>>,
-    pending: Arc<AtomicUsize>,
+/// The frames waiting for one subscriber connection of a publication.
+#[derive(Default)]
+struct LinkQueue {
+    frames: VecDeque<Arc<Vec<u8>>>,
+    /// A frame is being written.
+    writing: bool,
+    /// The connection is gone (or the publisher dropped).
+    closed: bool,
 }
+
+/// One subscriber connection of a publication: a queue that keeps the newest [`QUEUE`]
+/// frames, drained by the connection's writer thread.
+type Link = Arc<(Mutex<LinkQueue>, Condvar)>;
 
 struct Publication {
     topic: String,
@@ -217,13 +231,13 @@ impl Node {
     ) -> Result<(), RosError> {
         let topic = resolve(topic);
         let callback: Callback = Arc::new(move |bytes: &[u8]| callback(T::from_bytes(bytes)));
-        let connected = Arc::new(Mutex::new(Vec::new()));
         lock(&self.inner.subscriptions).push(Subscription {
             topic: topic.clone(),
             ty: T::TYPE,
             md5: msg::md5sum(T::TYPE),
             callback,
-            connected,
+            listed: Arc::default(),
+            connected: Arc::default(),
         });
         let publishers = self.master_call(
             "registerSubscriber",
@@ -447,9 +461,12 @@ fn decode_header(body: &[u8]) -> HashMap<String, String> {
     fields
 }
 
+/// The master's full list of `topic`'s publishers: links start to new ones; links to
+/// publishers no longer listed end at their next message (or silence).
 fn connect_publishers(inner: &Arc<Inner>, topic: &str, uris: &[String]) {
     let subs = lock(&inner.subscriptions);
     let Some(sub) = subs.iter().find(|s| s.topic == topic) else { return };
+    *lock(&sub.listed) = uris.to_vec();
     for uri in uris {
         {
             let mut connected = lock(&sub.connected);
@@ -465,6 +482,7 @@ fn connect_publishers(inner: &Arc<Inner>, topic: &str, uris: &[String]) {
             ty: sub.ty,
             md5: sub.md5.clone(),
             callback: sub.callback.clone(),
+            listed: sub.listed.clone(),
             connected: sub.connected.clone(),
             publisher: uri.clone(),
         };
@@ -479,21 +497,55 @@ struct SubscriberLink {
     ty: &'static str,
     md5: String,
     callback: Callback,
+    listed: Arc<Mutex<Vec<String>>>,
     connected: Arc<Mutex<Vec<String>>>,
     publisher: String,
 }
 
 impl SubscriberLink {
+    /// Whether the link should (still) run: the node is open and the master lists the
+    /// publisher.
+    fn wanted(&self) -> bool {
+        self.node.upgrade().is_some_and(|n| !n.closed.load(Ordering::SeqCst))
+            && lock(&self.listed).contains(&self.publisher)
+    }
+
     fn run(self) {
-        if let Err(e) = self.receive()
-            && self.node.upgrade().is_some_and(|n| !n.closed.load(Ordering::SeqCst))
-        {
-            eprintln!("[{}] {}: {e}", self.callerid, self.topic);
+        let mut backoff = Duration::from_millis(250);
+        let mut failing = false;
+        while self.wanted() {
+            match self.receive() {
+                Ok(received) => {
+                    if received {
+                        backoff = Duration::from_millis(250);
+                        failing = false;
+                    }
+                }
+                Err((e, received)) => {
+                    if received {
+                        backoff = Duration::from_millis(250);
+                        failing = false;
+                    }
+                    if !failing && self.wanted() {
+                        eprintln!(
+                            "[{}] {}: {e} (retrying while it is listed)",
+                            self.callerid, self.topic
+                        );
+                    }
+                    failing = true;
+                }
+            }
+            std::thread::sleep(backoff);
+            backoff = (backoff * 2).min(Duration::from_secs(5));
         }
         lock(&self.connected).retain(|u| u != &self.publisher);
     }
 
-    fn receive(&self) -> Result<(), String> {
+    /// One connection: requestTopic, handshake, then messages until the link ends.
+    /// `Ok(received)` when it ended cleanly (EOF, or the publisher is no longer listed);
+    /// `Err((why, received))` otherwise. `received`: at least one message came.
+    fn receive(&self) -> Result<bool, (String, bool)> {
+        let fail = |e: String| (e, false);
         let answer = xmlrpc::call(
             &self.publisher,
             "requestTopic",
@@ -503,25 +555,21 @@ impl SubscriberLink {
                 Value::Array(vec![Value::Array(vec![Value::str("TCPROS")])]),
             ],
         )
-        .map_err(|e| format!("publisher {e}"))?;
+        .map_err(|e| fail(format!("publisher {e}")))?;
         let (host, port) = match answer.as_array() {
             Some([code, _, Value::Array(p)]) if code.as_int() == Some(1) => match p.as_slice() {
                 [proto, host, port] if proto.as_str() == Some("TCPROS") => (
                     host.as_str().unwrap_or("").to_string(),
                     u16::try_from(port.as_int().unwrap_or(0)).unwrap_or(0),
                 ),
-                _ => return Err(format!("no TCPROS offered: {answer:?}")),
+                _ => return Err(fail(format!("no TCPROS offered: {answer:?}"))),
             },
-            _ => return Err(format!("requestTopic refused: {answer:?}")),
+            _ => return Err(fail(format!("requestTopic refused: {answer:?}"))),
         };
-        let addr = (host.as_str(), port)
-            .to_socket_addrs()
-            .map_err(|e| format!("{host}:{port}: {e}"))?
-            .next()
-            .ok_or_else(|| format!("{host}:{port}: no address"))?;
-        let mut stream = TcpStream::connect_timeout(&addr, Duration::from_secs(3))
-            .map_err(|e| format!("{host}:{port}: {e}"))?;
+        let mut stream = xmlrpc::connect(&host, port, Duration::from_secs(3))
+            .map_err(|e| fail(format!("{host}:{port}: {e}")))?;
         let _ = stream.set_nodelay(true);
+        let _ = stream.set_read_timeout(Some(SILENT_LINK));
         let definition = msg::full_definition(self.ty);
         let header = encode_header(&[
             ("message_definition", &definition),
@@ -531,21 +579,31 @@ impl SubscriberLink {
             ("type", self.ty),
             ("tcp_nodelay", "1"),
         ]);
-        stream.write_all(&header).map_err(|e| e.to_string())?;
-        let reply = decode_header(&read_frame(&mut stream).map_err(|e| e.to_string())?);
+        stream.write_all(&header).map_err(|e| fail(e.to_string()))?;
+        let reply = decode_header(&read_frame(&mut stream).map_err(|e| fail(e.to_string()))?);
         if let Some(error) = reply.get("error") {
-            return Err(format!("publisher refused the connection: {error}"));
+            return Err(fail(format!("publisher refused the connection: {error}")));
         }
+        let mut received = false;
         loop {
             let body = match read_frame(&mut stream) {
                 Ok(b) => b,
-                Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(()),
-                Err(e) => return Err(e.to_string()),
+                Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(received),
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) =>
+                {
+                    return Err((format!("no message for {} s", SILENT_LINK.as_secs()), received));
+                }
+                Err(e) => return Err((e.to_string(), received)),
             };
-            match self.node.upgrade() {
-                Some(n) if !n.closed.load(Ordering::SeqCst) => (self.callback)(&body),
-                _ => return Ok(()),
+            if !self.wanted() {
+                return Ok(received);
             }
+            received = true;
+            (self.callback)(&body);
         }
     }
 }
@@ -611,22 +669,32 @@ fn serve_subscriber(
         return;
     }
     let _ = stream.set_nodelay(request.get("tcp_nodelay").is_none_or(|v| v == "1"));
-    let (tx, rx) = sync_channel::<Arc<Vec<u8>>>(QUEUE);
-    let pending = Arc::new(AtomicUsize::new(0));
+    let link: Link = Arc::default();
     if header.latch
         && let Some(last) = lock(latched).clone()
     {
-        pending.fetch_add(1, Ordering::SeqCst);
-        let _ = tx.try_send(last);
+        lock(&link.0).frames.push_back(last);
     }
-    lock(links).push(Link { tx, pending: pending.clone() });
-    for frame in rx {
+    lock(links).push(link.clone());
+    let (queue, ready) = &*link;
+    loop {
+        let mut q = lock(queue);
+        while q.frames.is_empty() && !q.closed {
+            q = ready.wait(q).unwrap_or_else(std::sync::PoisonError::into_inner);
+        }
+        let Some(frame) = q.frames.pop_front() else { break }; // closed
+        q.writing = true;
+        drop(q);
         let sent = stream.write_all(&frame).is_ok();
-        pending.fetch_sub(1, Ordering::SeqCst);
+        let mut q = lock(queue);
+        q.writing = false;
         if !sent {
-            break; // the link's sender is dropped on the next publish
+            q.closed = true;
+            q.frames.clear();
+            break;
         }
     }
+    ready.notify_all();
 }
 
 /// Publishes messages of type `T` on one topic.
@@ -661,21 +729,22 @@ impl<T: Message> Publisher<T> {
             *lock(latched) = Some(frame.clone());
         }
         lock(&self.links).retain(|link| {
-            link.pending.fetch_add(1, Ordering::SeqCst);
-            match link.tx.try_send(frame.clone()) {
-                Ok(()) => true,
-                Err(TrySendError::Full(_)) => {
-                    link.pending.fetch_sub(1, Ordering::SeqCst);
-                    true
-                }
-                Err(TrySendError::Disconnected(_)) => false,
+            let mut q = lock(&link.0);
+            if q.closed {
+                return false;
             }
+            q.frames.push_back(frame.clone());
+            if q.frames.len() > QUEUE {
+                q.frames.pop_front(); // a slow reader loses the oldest, never the newest
+            }
+            link.1.notify_all();
+            true
         });
     }
 
     /// Subscribers connected now.
     pub fn subscribers(&self) -> usize {
-        lock(&self.links).len()
+        lock(&self.links).iter().filter(|l| !lock(&l.0).closed).count()
     }
 
     /// Waits until every queued message has been written to its socket, or `timeout`.
@@ -683,15 +752,26 @@ impl<T: Message> Publisher<T> {
     pub fn flush(&self, timeout: Duration) -> bool {
         let end = Instant::now() + timeout;
         loop {
-            let pending: usize =
-                lock(&self.links).iter().map(|l| l.pending.load(Ordering::SeqCst)).sum();
-            if pending == 0 {
+            let pending = lock(&self.links).iter().any(|l| {
+                let q = lock(&l.0);
+                !q.closed && (q.writing || !q.frames.is_empty())
+            });
+            if !pending {
                 return true;
             }
             if Instant::now() >= end {
                 return false;
             }
             std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+}
+
+impl<T> Drop for Publisher<T> {
+    fn drop(&mut self) {
+        for link in lock(&self.links).iter() {
+            lock(&link.0).closed = true;
+            link.1.notify_all();
         }
     }
 }

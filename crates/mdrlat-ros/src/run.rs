@@ -15,8 +15,8 @@ pub enum Trigger {
     /// On a fixed clock at `rate_hz` (the default; as the authors' `rospy.Rate(5)` loop).
     #[default]
     Timer,
-    /// As soon as a new scan arrives, at most `rate_hz` times per second (lowest
-    /// sensor-to-command latency; the command rate follows the laser's rate).
+    /// As soon as a new scan arrives, but not sooner than 0.9 / `rate_hz` after the last
+    /// decision (lowest sensor-to-command latency; the command rate follows the laser's).
     Scan,
 }
 
@@ -101,6 +101,12 @@ pub fn run(
     log: &(dyn Fn(&str) + Sync),
 ) -> Result<RunSummary, RosError> {
     let (uses_laser, uses_depth) = (policy.uses_laser(), policy.uses_depth());
+    if config.trigger == Trigger::Scan && !uses_laser {
+        return Err(RosError::Config(
+            "the scan trigger needs a policy that reads the laser (this one does not): use the timer"
+                .into(),
+        ));
+    }
     let shared = Arc::new(Shared {
         controller: Mutex::new(Controller::new(config.controller.clone(), uses_laser, uses_depth)),
         scans: Mutex::new(0),
@@ -208,7 +214,7 @@ pub fn run(
                 let (count, fresh) = (*scans, *scans != seen_scans);
                 drop(scans);
                 let now = Instant::now();
-                let due_at = last_decision.map(|t| t + period.mul_f32(0.75));
+                let due_at = last_decision.map(|t| t + period.mul_f32(0.9));
                 if fresh && due_at.is_none_or(|d| now >= d) {
                     seen_scans = count;
                     last_decision = Some(now);

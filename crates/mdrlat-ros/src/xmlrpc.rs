@@ -164,9 +164,14 @@ impl Element {
     }
 }
 
+/// Deepest element nesting accepted: ROS's values nest 6 deep; a bound keeps recursion (and
+/// the tree's drop) far from the stack's end whatever a peer sends.
+const MAX_DEPTH: usize = 32;
+
 struct Parser<'a> {
     s: &'a str,
     pos: usize,
+    depth: usize,
 }
 
 impl<'a> Parser<'a> {
@@ -194,6 +199,16 @@ impl<'a> Parser<'a> {
         }
     }
     fn element(&mut self) -> Result<Element, XmlRpcError> {
+        if self.depth >= MAX_DEPTH {
+            return Err(self.err(&format!("elements nested deeper than {MAX_DEPTH}")));
+        }
+        self.depth += 1;
+        let el = self.element_body();
+        self.depth -= 1;
+        el
+    }
+
+    fn element_body(&mut self) -> Result<Element, XmlRpcError> {
         if !self.rest().starts_with('<') {
             return Err(self.err("expected an element"));
         }
@@ -276,7 +291,7 @@ fn unescape(s: &str) -> String {
 }
 
 fn parse_document(text: &str) -> Result<Element, XmlRpcError> {
-    let mut p = Parser { s: text, pos: 0 };
+    let mut p = Parser { s: text, pos: 0, depth: 0 };
     p.skip_misc()?;
     p.element()
 }
@@ -387,12 +402,14 @@ pub fn host_port(url: &str) -> Result<(String, u16), XmlRpcError> {
 
 /// Reads one HTTP message (request or response): the start line and the body.
 fn read_http(stream: &mut BufReader<TcpStream>) -> std::io::Result<(String, String)> {
+    // Bounded lines and header count: a peer cannot make us buffer without end.
+    let mut read_line = |line: &mut String| (&mut *stream).take(8192).read_line(line);
     let mut start = String::new();
-    stream.read_line(&mut start)?;
+    read_line(&mut start)?;
     let mut length = None;
-    loop {
+    for _ in 0..100 {
         let mut line = String::new();
-        if stream.read_line(&mut line)? == 0 {
+        if read_line(&mut line)? == 0 {
             break;
         }
         let line = line.trim_end();
@@ -423,6 +440,22 @@ fn read_http(stream: &mut BufReader<TcpStream>) -> std::io::Result<(String, Stri
     Ok((start.trim_end().to_string(), body))
 }
 
+/// Connects to `host:port`, trying every address it resolves to (`localhost` may give
+/// `::1` first while the peer listens on 127.0.0.1 only).
+///
+/// # Errors
+/// No address answers; the last error.
+pub fn connect(host: &str, port: u16, timeout: Duration) -> std::io::Result<TcpStream> {
+    let mut last = std::io::Error::new(std::io::ErrorKind::NotFound, "no address");
+    for addr in (host, port).to_socket_addrs()? {
+        match TcpStream::connect_timeout(&addr, timeout) {
+            Ok(s) => return Ok(s),
+            Err(e) => last = e,
+        }
+    }
+    Err(last)
+}
+
 /// Calls `method` on the XML-RPC server at `url` and returns its value.
 ///
 /// # Errors
@@ -430,12 +463,7 @@ fn read_http(stream: &mut BufReader<TcpStream>) -> std::io::Result<(String, Stri
 pub fn call(url: &str, method: &str, params: &[Value]) -> Result<Value, XmlRpcError> {
     let (host, port) = host_port(url)?;
     let io = |source| XmlRpcError::Io { url: url.to_string(), source };
-    let addr = (host.as_str(), port)
-        .to_socket_addrs()
-        .map_err(io)?
-        .next()
-        .ok_or_else(|| XmlRpcError::Url(url.to_string()))?;
-    let stream = TcpStream::connect_timeout(&addr, Duration::from_secs(3)).map_err(io)?;
+    let stream = connect(&host, port, Duration::from_secs(3)).map_err(io)?;
     stream.set_read_timeout(Some(Duration::from_secs(10))).map_err(io)?;
     stream.set_nodelay(true).map_err(io)?;
     let body = encode_call(method, params);
@@ -535,6 +563,19 @@ mod tests {
             <name>faultCode</name><value><int>1</int></value></member></struct></value></fault>\
             </methodResponse>";
         assert!(matches!(decode_response(fault), Err(XmlRpcError::Fault(_))));
+    }
+
+    #[test]
+    fn deep_nesting_is_an_error_not_a_stack_overflow() {
+        let deep = format!("{}{}", "<a>".repeat(100_000), "</a>".repeat(100_000));
+        let e = decode_response(&deep).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(e.contains("nested deeper than 32"), "{e}");
+        let deep_value = format!(
+            "<methodResponse><params><param>{}{}</param></params></methodResponse>",
+            "<value><array><data>".repeat(20),
+            "</data></array></value>".repeat(20)
+        );
+        assert!(decode_response(&deep_value).is_err());
     }
 
     #[test]

@@ -108,11 +108,17 @@ pub fn run(a: &RosArgs) -> Result<()> {
     let scan_pub = robot.advertise::<LaserScan>(&config.scan_topic, false)?;
     let depth_pub = robot.advertise::<Image>(&config.depth_topic, false)?;
     let odom_pub = robot.advertise::<Odometry>(&config.odom_topic, false)?;
-    let arrivals: Arc<Mutex<Vec<Instant>>> = Arc::default();
+    // Arrival time of each Twist and whether it was a driving command (a stopped node skips
+    // inference: timing its zeros would flatter it).
+    let arrivals: Arc<Mutex<Vec<(Instant, bool)>>> = Arc::default();
     {
         let arrivals = arrivals.clone();
-        robot.subscribe::<Twist>(&config.cmd_topic, move |_| {
-            arrivals.lock().unwrap_or_else(std::sync::PoisonError::into_inner).push(Instant::now());
+        robot.subscribe::<Twist>(&config.cmd_topic, move |t| {
+            let driving = t.is_ok_and(|t| t.linear.x != 0.0 || t.angular.z != 0.0);
+            arrivals
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .push((Instant::now(), driving));
         })?;
     }
     let stop = Arc::new(AtomicBool::new(false));
@@ -165,7 +171,10 @@ pub fn run(a: &RosArgs) -> Result<()> {
             }
             std::thread::sleep(Duration::from_micros(100));
         };
-        let Some(at) = got else { bail!("no Twist within 1 s of scan {k}") };
+        let Some((at, driving)) = got else { bail!("no Twist within 1 s of scan {k}") };
+        if k >= warmup && !driving {
+            bail!("the node sent zero velocity for scan {k}: it is not driving (stale input?)");
+        }
         if k >= warmup {
             latencies.push((at - sent).as_secs_f64() * 1e3);
         }

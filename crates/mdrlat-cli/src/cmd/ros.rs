@@ -176,11 +176,11 @@ fn node_config(a: &Args) -> Result<NodeConfig> {
     if !(a.rate_hz.is_finite() && a.rate_hz > 0.0 && a.rate_hz <= 100.0) {
         bail!("--rate-hz {}: expected a rate in (0, 100]", a.rate_hz);
     }
-    if !(a.stale_after_s.is_finite() && a.stale_after_s > 0.0) {
-        bail!("--stale-after-s {}: expected a positive number of seconds", a.stale_after_s);
+    if !(a.stale_after_s.is_finite() && a.stale_after_s > 0.0 && a.stale_after_s <= 60.0) {
+        bail!("--stale-after-s {}: expected seconds in (0, 60]", a.stale_after_s);
     }
-    if !a.scan_yaw_deg.is_finite() {
-        bail!("--scan-yaw-deg {}: expected a number of degrees", a.scan_yaw_deg);
+    if !(a.scan_yaw_deg.is_finite() && a.scan_yaw_deg.abs() <= 360.0) {
+        bail!("--scan-yaw-deg {}: expected degrees in [-360, 360]", a.scan_yaw_deg);
     }
     for (flag, v) in [("--max-linear", a.max_linear), ("--max-angular", a.max_angular)] {
         if !(v.is_finite() && v >= 0.0) {
@@ -279,7 +279,7 @@ pub struct SimArgs {
     #[arg(long, value_enum, default_value = "32FC1")]
     pub depth_encoding: DepthEncoding,
     /// A velocity command older than this (seconds) is dropped and the robot brakes, as a
-    /// Kobuki base does.
+    /// Kobuki base does (commands are also clamped to its 0.7 m/s and 180°/s).
     #[arg(long, default_value_t = 0.5)]
     pub cmd_timeout_s: f32,
     /// Simulated seconds per wall-clock second.
@@ -299,6 +299,11 @@ pub struct SimArgs {
     pub picture: Option<PathBuf>,
 }
 
+/// The fastest a Kobuki base drives, m/s; `ros-sim` clamps `/cmd_vel` to it.
+const KOBUKI_MAX_V: f32 = 0.7;
+/// The fastest a Kobuki base turns, rad/s.
+const KOBUKI_MAX_W: f32 = std::f32::consts::PI;
+
 /// The latest `/cmd_vel` and when it arrived.
 #[derive(Debug, Default)]
 struct LastCommand {
@@ -308,11 +313,14 @@ struct LastCommand {
 
 /// `mdrlat ros-sim`.
 pub fn sim(a: &SimArgs) -> Result<()> {
-    if !(a.speed.is_finite() && a.speed > 0.0) {
-        bail!("--speed {}: expected a positive factor", a.speed);
+    if !(a.speed.is_finite() && (0.01..=100.0).contains(&a.speed)) {
+        bail!("--speed {}: expected a factor in [0.01, 100]", a.speed);
     }
-    if !(a.cmd_timeout_s.is_finite() && a.cmd_timeout_s > 0.0) {
-        bail!("--cmd-timeout-s {}: expected a positive number of seconds", a.cmd_timeout_s);
+    if !(a.cmd_timeout_s.is_finite() && a.cmd_timeout_s > 0.0 && a.cmd_timeout_s <= 60.0) {
+        bail!("--cmd-timeout-s {}: expected seconds in (0, 60]", a.cmd_timeout_s);
+    }
+    if !(a.duration_s.is_finite() && a.duration_s >= 0.0) {
+        bail!("--duration-s {}: expected a non-negative number of seconds", a.duration_s);
     }
     let mut config = Config::load_or_default(a.config.as_deref())?.sim;
     config.max_episode_steps = if a.episode_steps == 0 { u32::MAX } else { a.episode_steps };
@@ -393,9 +401,11 @@ pub fn sim(a: &SimArgs) -> Result<()> {
         let command = {
             let l = last.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
             match l.twist {
-                Some((t, at)) if now.duration_since(at) <= timeout && finite(&t) => {
-                    Velocity::new(t.linear.x as f32, t.angular.z as f32)
-                }
+                // A Kobuki's own limits: 0.7 m/s, 180°/s.
+                Some((t, at)) if now.duration_since(at) <= timeout && finite(&t) => Velocity::new(
+                    (t.linear.x as f32).clamp(-KOBUKI_MAX_V, KOBUKI_MAX_V),
+                    (t.angular.z as f32).clamp(-KOBUKI_MAX_W, KOBUKI_MAX_W),
+                ),
                 _ => Velocity::default(),
             }
         };
