@@ -322,6 +322,60 @@ fn policy_drives_the_simulator_over_ros() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// A publisher killed with SIGKILL (still listed by the master) and started again: the node
+/// stops on stale data, then reconnects and drives again.
+#[test]
+fn node_survives_a_publisher_killed_and_restarted() {
+    if !ros_available() {
+        return;
+    }
+    let master = Master::start();
+    let dir = tmp("restart");
+    let csv = dir.join("node.csv");
+    let mut node = Guard(
+        master
+            .command(BIN)
+            .args(["ros", "--untrained", "--variant", "multi", "--seed", "2"])
+            .arg("--log")
+            .arg(&csv)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let feed = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros/feed.py");
+    let mut first = Guard(master.command(PYTHON).arg(&feed).arg("60").spawn().unwrap());
+    std::thread::sleep(Duration::from_secs(4));
+    first.0.kill().unwrap(); // SIGKILL: no unregistration, the master still lists it
+    let _ = first.0.wait();
+    std::thread::sleep(Duration::from_secs(2));
+    let mut second = master.command(PYTHON).arg(&feed).arg("4").spawn().unwrap();
+    assert!(second.wait().unwrap().success());
+    kill("TERM", i64::from(node.0.id()));
+    assert!(wait_exit(&mut node.0, Duration::from_secs(5)).success());
+    let mut log = String::new();
+    std::io::Read::read_to_string(node.0.stderr.as_mut().unwrap(), &mut log).unwrap();
+    // The tick log must read: driving, then stopped, then driving again.
+    let driving: Vec<bool> = std::fs::read_to_string(&csv)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1) == Some("1"))
+        .collect();
+    let mut runs: Vec<(bool, usize)> = Vec::new();
+    for d in driving {
+        match runs.last_mut() {
+            Some((v, n)) if *v == d => *n += 1,
+            _ => runs.push((d, 1)),
+        }
+    }
+    let long: Vec<(bool, usize)> = runs.into_iter().filter(|r| r.1 >= 3).collect();
+    let pattern: Vec<bool> = long.iter().map(|r| r.0).collect();
+    assert!(pattern.windows(3).any(|w| w == [true, false, true]), "driving runs {long:?}\n{log}");
+    assert!(log.contains("is stale"), "{log}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 #[test]
 fn bench_ros_reports_latency_as_json() {
     if !ros_available() {
