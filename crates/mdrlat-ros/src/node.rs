@@ -105,9 +105,9 @@ struct Subscription {
     md5: String,
     callback: Callback,
     /// Publisher APIs the master lists now (the last `publisherUpdate`).
-    listed: Arc<Mutex<Vec<String>>>,
+    listed: Mutex<Vec<String>>,
     /// Publisher APIs with a link thread.
-    connected: Arc<Mutex<Vec<String>>>,
+    connected: Mutex<Vec<String>>,
 }
 
 /// The frames waiting for one subscriber connection of a publication.
@@ -135,7 +135,7 @@ struct Inner {
     master: String,
     host: String,
     api: String,
-    subscriptions: Mutex<Vec<Subscription>>,
+    subscriptions: Mutex<Vec<Arc<Subscription>>>,
     publications: Mutex<Vec<Publication>>,
     shutdown_requested: AtomicBool,
     closed: AtomicBool,
@@ -231,14 +231,14 @@ impl Node {
     ) -> Result<(), RosError> {
         let topic = resolve(topic);
         let callback: Callback = Arc::new(move |bytes: &[u8]| callback(T::from_bytes(bytes)));
-        lock(&self.inner.subscriptions).push(Subscription {
+        lock(&self.inner.subscriptions).push(Arc::new(Subscription {
             topic: topic.clone(),
             ty: T::TYPE,
             md5: msg::md5sum(T::TYPE),
             callback,
-            listed: Arc::default(),
-            connected: Arc::default(),
-        });
+            listed: Mutex::default(),
+            connected: Mutex::default(),
+        }));
         let publishers = self.master_call(
             "registerSubscriber",
             vec![Value::str(&topic), Value::str(T::TYPE), Value::str(&self.inner.api)],
@@ -478,27 +478,18 @@ fn connect_publishers(inner: &Arc<Inner>, topic: &str, uris: &[String]) {
         let job = SubscriberLink {
             node: Arc::downgrade(inner),
             callerid: inner.name.clone(),
-            topic: sub.topic.clone(),
-            ty: sub.ty,
-            md5: sub.md5.clone(),
-            callback: sub.callback.clone(),
-            listed: sub.listed.clone(),
-            connected: sub.connected.clone(),
+            sub: sub.clone(),
             publisher: uri.clone(),
         };
         let _ = std::thread::Builder::new().name("tcpros-sub".into()).spawn(move || job.run());
     }
 }
 
+/// One subscriber connection to one publisher, on its own thread.
 struct SubscriberLink {
     node: Weak<Inner>,
     callerid: String,
-    topic: String,
-    ty: &'static str,
-    md5: String,
-    callback: Callback,
-    listed: Arc<Mutex<Vec<String>>>,
-    connected: Arc<Mutex<Vec<String>>>,
+    sub: Arc<Subscription>,
     publisher: String,
 }
 
@@ -507,7 +498,7 @@ impl SubscriberLink {
     /// publisher.
     fn wanted(&self) -> bool {
         self.node.upgrade().is_some_and(|n| !n.closed.load(Ordering::SeqCst))
-            && lock(&self.listed).contains(&self.publisher)
+            && lock(&self.sub.listed).contains(&self.publisher)
     }
 
     fn run(self) {
@@ -529,7 +520,7 @@ impl SubscriberLink {
                     if !failing && self.wanted() {
                         eprintln!(
                             "[{}] {}: {e} (retrying while it is listed)",
-                            self.callerid, self.topic
+                            self.callerid, self.sub.topic
                         );
                     }
                     failing = true;
@@ -538,7 +529,7 @@ impl SubscriberLink {
             std::thread::sleep(backoff);
             backoff = (backoff * 2).min(Duration::from_secs(5));
         }
-        lock(&self.connected).retain(|u| u != &self.publisher);
+        lock(&self.sub.connected).retain(|u| u != &self.publisher);
     }
 
     /// One connection: requestTopic, handshake, then messages until the link ends.
@@ -551,7 +542,7 @@ impl SubscriberLink {
             "requestTopic",
             &[
                 Value::str(&self.callerid),
-                Value::str(&self.topic),
+                Value::str(&self.sub.topic),
                 Value::Array(vec![Value::Array(vec![Value::str("TCPROS")])]),
             ],
         )
@@ -570,13 +561,13 @@ impl SubscriberLink {
             .map_err(|e| fail(format!("{host}:{port}: {e}")))?;
         let _ = stream.set_nodelay(true);
         let _ = stream.set_read_timeout(Some(SILENT_LINK));
-        let definition = msg::full_definition(self.ty);
+        let definition = msg::full_definition(self.sub.ty);
         let header = encode_header(&[
             ("message_definition", &definition),
             ("callerid", &self.callerid),
-            ("topic", &self.topic),
-            ("md5sum", &self.md5),
-            ("type", self.ty),
+            ("topic", &self.sub.topic),
+            ("md5sum", &self.sub.md5),
+            ("type", self.sub.ty),
             ("tcp_nodelay", "1"),
         ]);
         stream.write_all(&header).map_err(|e| fail(e.to_string()))?;
@@ -603,7 +594,7 @@ impl SubscriberLink {
                 return Ok(received);
             }
             received = true;
-            (self.callback)(&body);
+            (self.sub.callback)(&body);
         }
     }
 }

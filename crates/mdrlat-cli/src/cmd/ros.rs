@@ -342,9 +342,12 @@ pub fn sim(a: &SimArgs) -> Result<()> {
     };
     let stop = stop_flag()?;
     let node = mdrlat_ros::Node::new(&a.name, &a.connection.master(), &a.connection.host())?;
-    let scan_pub = node.advertise::<LaserScan>(&a.topics.scan_topic, false)?;
-    let depth_pub = node.advertise::<Image>(&a.topics.depth_topic, false)?;
-    let odom_pub = node.advertise::<Odometry>(&a.topics.odom_topic, false)?;
+    let sensors = SimSensors {
+        scan: node.advertise::<LaserScan>(&a.topics.scan_topic, false)?,
+        depth: node.advertise::<Image>(&a.topics.depth_topic, false)?,
+        odom: node.advertise::<Odometry>(&a.topics.odom_topic, false)?,
+        encoding: a.depth_encoding,
+    };
     let last = Arc::new(Mutex::new(LastCommand::default()));
     {
         let last = last.clone();
@@ -378,15 +381,7 @@ pub fn sim(a: &SimArgs) -> Result<()> {
     let mut best = (0u32, None);
     let scale = px_per_m(env.world(), 640.0);
     let (mut steps, mut collisions, mut distance) = (0u64, 0u64, 0f64);
-    publish_sensors(
-        &env,
-        a.depth_encoding,
-        seq,
-        &scan_pub,
-        &depth_pub,
-        &odom_pub,
-        Velocity::default(),
-    );
+    sensors.publish(&env, seq, Velocity::default());
     let mut next = Instant::now() + period;
     while !stop.load(Ordering::SeqCst) && !node.shutdown_requested() {
         if a.duration_s > 0.0 && start.elapsed().as_secs_f32() >= a.duration_s {
@@ -463,15 +458,7 @@ pub fn sim(a: &SimArgs) -> Result<()> {
             env.reset_stream(a.seed, episode)?;
             trail.push(env.pose().position());
         }
-        publish_sensors(
-            &env,
-            a.depth_encoding,
-            seq,
-            &scan_pub,
-            &depth_pub,
-            &odom_pub,
-            info.velocity,
-        );
+        sensors.publish(&env, seq, info.velocity);
     }
     if let Some((path, f)) = &mut csv {
         f.flush().with_context(|| format!("writing {}", path.display()))?;
@@ -505,64 +492,66 @@ fn finite(t: &Twist) -> bool {
     t.linear.x.is_finite() && t.angular.z.is_finite()
 }
 
-/// Publishes the simulator's current laser, depth and odometry as a turtlebot2 with an
-/// RPLIDAR and a Kinect would.
-fn publish_sensors(
-    env: &mdrlat_sim::Env,
+/// The simulator's sensor topics.
+struct SimSensors {
+    scan: mdrlat_ros::Publisher<LaserScan>,
+    depth: mdrlat_ros::Publisher<Image>,
+    odom: mdrlat_ros::Publisher<Odometry>,
     encoding: DepthEncoding,
-    seq: u32,
-    scan_pub: &mdrlat_ros::Publisher<LaserScan>,
-    depth_pub: &mdrlat_ros::Publisher<Image>,
-    odom_pub: &mdrlat_ros::Publisher<Odometry>,
-    velocity: Velocity,
-) {
-    let stamp = Time::now();
-    let header = |frame: &str| Header { seq, stamp, frame_id: frame.to_string() };
-    let obs = env.observation();
-    let laser = env.laser().config();
-    let dt = env.config().dt_s;
-    scan_pub.publish(&LaserScan {
-        header: header("laser"),
-        angle_min: laser_beam_angle(0),
-        angle_max: laser_beam_angle(LASER_BEAMS - 1),
-        angle_increment: laser_beam_angle(1) - laser_beam_angle(0),
-        time_increment: 0.0,
-        scan_time: dt,
-        range_min: 0.0,
-        range_max: laser.max_range_m,
-        ranges: obs.laser.latest().to_vec(),
-        intensities: Vec::new(),
-    });
-    let depth = obs.depth.latest();
-    let (data, step) = match encoding {
-        DepthEncoding::F32 => (depth.iter().flat_map(|d| d.to_le_bytes()).collect(), 4),
-        DepthEncoding::U16 => (
-            depth
-                .iter()
-                .flat_map(|d| ((d * 1000.0).round().clamp(0.0, 65535.0) as u16).to_le_bytes())
-                .collect(),
-            2,
-        ),
-    };
-    depth_pub.publish(&Image {
-        header: header("camera_depth_optical_frame"),
-        height: DEPTH_ROWS as u32,
-        width: DEPTH_COLS as u32,
-        encoding: match encoding {
-            DepthEncoding::F32 => "32FC1".into(),
-            DepthEncoding::U16 => "16UC1".into(),
-        },
-        is_bigendian: 0,
-        step: (DEPTH_COLS * step) as u32,
-        data,
-    });
-    let pose = env.pose();
-    odom_pub.publish(&Odometry {
-        header: header("odom"),
-        child_frame_id: "base_footprint".into(),
-        position: Vector3 { x: f64::from(pose.x), y: f64::from(pose.y), z: 0.0 },
-        orientation: Quaternion::from_yaw(f64::from(pose.yaw)),
-        twist: Twist::planar(f64::from(velocity.v), f64::from(velocity.w)),
-        ..Odometry::default()
-    });
+}
+
+impl SimSensors {
+    /// Publishes the simulator's current laser, depth and odometry as a turtlebot2 with an
+    /// RPLIDAR and a Kinect would.
+    fn publish(&self, env: &mdrlat_sim::Env, seq: u32, velocity: Velocity) {
+        let stamp = Time::now();
+        let header = |frame: &str| Header { seq, stamp, frame_id: frame.to_string() };
+        let obs = env.observation();
+        let laser = env.laser().config();
+        let dt = env.config().dt_s;
+        self.scan.publish(&LaserScan {
+            header: header("laser"),
+            angle_min: laser_beam_angle(0),
+            angle_max: laser_beam_angle(LASER_BEAMS - 1),
+            angle_increment: laser_beam_angle(1) - laser_beam_angle(0),
+            time_increment: 0.0,
+            scan_time: dt,
+            range_min: 0.0,
+            range_max: laser.max_range_m,
+            ranges: obs.laser.latest().to_vec(),
+            intensities: Vec::new(),
+        });
+        let depth = obs.depth.latest();
+        let (data, step) = match self.encoding {
+            DepthEncoding::F32 => (depth.iter().flat_map(|d| d.to_le_bytes()).collect(), 4),
+            DepthEncoding::U16 => (
+                depth
+                    .iter()
+                    .flat_map(|d| ((d * 1000.0).round().clamp(0.0, 65535.0) as u16).to_le_bytes())
+                    .collect(),
+                2,
+            ),
+        };
+        self.depth.publish(&Image {
+            header: header("camera_depth_optical_frame"),
+            height: DEPTH_ROWS as u32,
+            width: DEPTH_COLS as u32,
+            encoding: match self.encoding {
+                DepthEncoding::F32 => "32FC1".into(),
+                DepthEncoding::U16 => "16UC1".into(),
+            },
+            is_bigendian: 0,
+            step: (DEPTH_COLS * step) as u32,
+            data,
+        });
+        let pose = env.pose();
+        self.odom.publish(&Odometry {
+            header: header("odom"),
+            child_frame_id: "base_footprint".into(),
+            position: Vector3 { x: f64::from(pose.x), y: f64::from(pose.y), z: 0.0 },
+            orientation: Quaternion::from_yaw(f64::from(pose.yaw)),
+            twist: Twist::planar(f64::from(velocity.v), f64::from(velocity.w)),
+            ..Odometry::default()
+        });
+    }
 }
