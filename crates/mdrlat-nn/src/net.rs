@@ -256,6 +256,17 @@ pub struct QNet {
     velocity: Option<Head>,
 }
 
+/// Time of one network stage (see [`QNet::stage_times`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StageTime {
+    /// The stage.
+    pub name: &'static str,
+    /// Forward milliseconds.
+    pub forward_ms: f64,
+    /// Backward milliseconds (when measured).
+    pub backward_ms: Option<f64>,
+}
+
 /// What [`QNet::forward`] returns.
 #[derive(Debug, Clone)]
 pub struct QOutput {
@@ -295,24 +306,28 @@ impl QNet {
         Tensor::cat(parts, 1)
     }
 
-    /// Wall time of each stage of one forward pass, milliseconds, in order (for `mdrlat
-    /// bench train --profile`). Meaningful on eager CPU backends, where every operation has
-    /// finished when it returns.
-    ///
-    /// # Shapes
-    /// As [`QNet::forward`].
+    /// Milliseconds of each stage of one forward pass and, with `backward` (on an autodiff
+    /// device only), of its backward pass: each stage's inputs are detached, so a stage's
+    /// backward time is its own. For `mdrlat bench train --profile`.
     pub fn stage_times(
         &self,
         laser: Option<Tensor<3>>,
         depth: Option<Tensor<4>>,
-    ) -> Vec<(&'static str, f64)> {
+        backward: bool,
+    ) -> Vec<StageTime> {
         let mut times = Vec::new();
         let mut timed = |name: &'static str, f: &mut dyn FnMut() -> Tensor<2>| {
             let t = std::time::Instant::now();
             let out = f();
             let _ = out.clone().into_data(); // make sure the work is done
-            times.push((name, t.elapsed().as_secs_f64() * 1e3));
-            out
+            let forward_ms = t.elapsed().as_secs_f64() * 1e3;
+            let backward_ms = backward.then(|| {
+                let t = std::time::Instant::now();
+                drop(out.clone().sum().backward());
+                t.elapsed().as_secs_f64() * 1e3
+            });
+            times.push(StageTime { name, forward_ms, backward_ms });
+            out.detach()
         };
         let d = self
             .depth

@@ -89,9 +89,10 @@ pub fn replay_bytes(variant: Variant, capacity: usize) -> usize {
     ReplayBuffer::new(capacity, reserve, variant.uses_laser(), variant.uses_depth()).memory_bytes()
 }
 
-/// Where one gradient step's time goes, milliseconds: the forward pass by stage (batch
-/// `batch`, no autodiff), the two target-network forwards of eq. (10), and the rest of the
-/// step (forward with autodiff, backward, Adam), each a median.
+/// Where one gradient step's time goes, milliseconds: forward and backward of each network
+/// stage (batch `batch`, with autodiff, each stage's inputs detached), the two
+/// target-network forwards of eq. (10), the rest of the step (losses, graph, Adam) and the
+/// whole step, each a median.
 pub fn profile(
     variant: Variant,
     batch: usize,
@@ -101,32 +102,44 @@ pub fn profile(
     let config = TrainConfig { variant, batch_size: batch, ..TrainConfig::default() };
     let mut learner = Learner::new(&config, device);
     let b = random_batch(variant, batch, 3);
-    let mut stages: Vec<(String, Vec<f64>)> = Vec::new();
+    // Per stage: forward and backward samples.
+    let mut stages: Vec<(&'static str, Vec<f64>, Vec<f64>)> = Vec::new();
     let start = Instant::now();
     while start.elapsed() < min_time || stages.first().is_none_or(|s| s.1.len() < 3) {
-        for (i, (name, ms)) in learner.stage_times(&b).into_iter().enumerate() {
+        for (i, st) in learner.stage_times(&b).into_iter().enumerate() {
             if stages.len() <= i {
-                stages.push((name.to_string(), Vec::new()));
+                stages.push((st.name, Vec::new(), Vec::new()));
             }
-            stages[i].1.push(ms);
+            stages[i].1.push(st.forward_ms);
+            stages[i].2.push(st.backward_ms.unwrap_or(0.0));
         }
     }
     let median = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
-    let mut out: Vec<(String, f64)> =
-        stages.into_iter().map(|(n, mut v)| (n, median(&mut v))).collect();
-    let forward: f64 = out.iter().map(|s| s.1).sum();
+    let mut out = Vec::new();
+    let (mut forward, mut backward) = (0.0, 0.0);
+    for (name, mut f, mut bw) in stages {
+        let (f, bw) = (median(&mut f), median(&mut bw));
+        out.push((format!("{name}: forward"), f));
+        out.push((format!("{name}: backward"), bw));
+        forward += f;
+        backward += bw;
+    }
     let (targets, _) = median_ms(min_time, || {
         learner.td_targets(&b);
     });
     let (step, _) = median_ms(min_time, || {
         learner.update(&b);
     });
-    out.push(("= forward, one pass".into(), forward));
+    out.push(("= forward with autodiff, one pass".into(), forward));
+    out.push(("= backward, stage by stage".into(), backward));
     out.push(("target forwards (eq. 10, 2 passes)".into(), targets));
-    out.push(("forward + backward + Adam".into(), (step - targets).max(0.0)));
+    out.push((
+        "rest: losses, Adam, bookkeeping".into(),
+        (step - targets - forward - backward).max(0.0),
+    ));
     out.push(("= gradient step".into(), step));
     out
 }

@@ -272,10 +272,11 @@ impl Learner {
         self.target = self.plain.clone();
     }
 
-    /// Forward stage times of the online network on `batch` (no autodiff), milliseconds.
-    pub fn stage_times(&self, batch: &Batch) -> Vec<(&'static str, f64)> {
-        let (l, d) = self.inputs::<false>(&batch.laser, &batch.depth, batch.size);
-        self.plain.stage_times(l, d)
+    /// Forward and backward times of each stage of the online network on `batch`
+    /// (with autodiff, as in a gradient step), milliseconds.
+    pub fn stage_times(&self, batch: &Batch) -> Vec<mdrlat_nn::StageTime> {
+        let (l, d) = self.inputs::<true>(&batch.laser, &batch.depth, batch.size);
+        self.online.stage_times(l, d, true)
     }
 
     /// The online network without autodiff (for evaluation and export).
