@@ -90,3 +90,25 @@ fn same_seed_same_weights() {
     };
     assert_eq!(run(), run());
 }
+
+#[test]
+fn profile_times_every_stage_forward_and_backward() {
+    let cfg = TrainConfig { variant: Variant::MultiAt, ..TrainConfig::default() };
+    let learner = Learner::new(&cfg, &Device::flex());
+    let b = batch(4, &[0.0; 4], &mut Rng::seed_from_u64(5), true);
+    let stages = learner.stage_times(&b);
+    let names: Vec<&str> = stages.iter().map(|s| s.name).collect();
+    assert_eq!(
+        names,
+        [
+            "depth stream (3 conv)",
+            "laser stream (3 conv1d)",
+            "value head",
+            "advantage head",
+            "velocity head (AT)"
+        ]
+    );
+    for s in &stages {
+        assert!(s.forward_ms > 0.0 && s.backward_ms.is_some_and(|b| b > 0.0), "{s:?}");
+    }
+}
