@@ -376,6 +376,35 @@ fn node_survives_a_publisher_killed_and_restarted() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// A laser that does not see the policy's 270° is a start-up error, not a silent guess.
+#[test]
+fn a_narrow_laser_is_a_startup_error() {
+    if !ros_available() {
+        return;
+    }
+    let master = Master::start();
+    let feed = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros/feed.py");
+    let _feed = Guard(master.command(PYTHON).arg(&feed).arg("30").arg("narrow").spawn().unwrap());
+    let mut node = Guard(
+        master
+            .command(BIN)
+            .args(["ros", "--untrained", "--variant", "laser-only"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let status = wait_exit(&mut node.0, Duration::from_secs(20));
+    let mut log = String::new();
+    std::io::Read::read_to_string(node.0.stderr.as_mut().unwrap(), &mut log).unwrap();
+    assert_eq!(status.code(), Some(1), "{log}");
+    assert!(
+        log.contains("the scan covers -90.0° to 90.0°, the policy needs −135° to 135°"),
+        "{log}"
+    );
+    assert!(log.contains("--fill-scan-gaps"), "{log}");
+}
+
 #[test]
 fn bench_ros_reports_latency_as_json() {
     if !ros_available() {

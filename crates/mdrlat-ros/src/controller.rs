@@ -5,7 +5,7 @@
 //! inference error gives zero velocity; each incident is logged once when it starts and
 //! once when it ends, never once per tick; commands are clamped to Table 1's limits.
 
-use crate::convert::{ScanOptions, convert_depth, resample_scan};
+use crate::convert::{ScanError, ScanOptions, convert_depth, resample_scan};
 use crate::msg::{Image, LaserScan, Odometry, WireError};
 use mdrlat_core::{
     Action, DEPTH_LEN, FRAME_STACK, FrameStack, LASER_BEAMS, Velocity, normalize_depth,
@@ -128,6 +128,9 @@ pub struct Controller {
     laser_input: Vec<f32>,
     depth_input: Vec<f32>,
     scratch_scan: [f32; LASER_BEAMS],
+    /// A scan has been read successfully.
+    scans_ok: bool,
+    fatal: Option<String>,
 }
 
 impl Controller {
@@ -155,6 +158,8 @@ impl Controller {
             laser_input: Vec::new(),
             depth_input: Vec::new(),
             scratch_scan: [0.0; LASER_BEAMS],
+            scans_ok: false,
+            fatal: None,
         }
     }
 
@@ -215,14 +220,32 @@ impl Controller {
     }
 
     /// A laser scan arrived (or failed to decode).
+    ///
+    /// A first scan that does not cover the policy's 270° is a set-up error, not an incident:
+    /// see [`Controller::fatal`].
     pub fn on_scan(&mut self, now: Instant, msg: Result<&LaserScan, &WireError>) -> Option<String> {
         let result = match msg {
-            Ok(scan) => resample_scan(scan, self.config.scan, &mut self.scratch_scan)
-                .map(|()| self.laser.frame.copy_from_slice(&self.scratch_scan))
-                .map_err(|e| e.to_string()),
+            Ok(scan) => match resample_scan(scan, self.config.scan, &mut self.scratch_scan) {
+                Ok(()) => {
+                    self.laser.frame.copy_from_slice(&self.scratch_scan);
+                    self.scans_ok = true;
+                    Ok(())
+                }
+                Err(e @ ScanError::Coverage { .. }) if !self.scans_ok => {
+                    self.fatal.get_or_insert_with(|| format!("laser scan: {e}"));
+                    Err(e.to_string())
+                }
+                Err(e) => Err(e.to_string()),
+            },
             Err(e) => Err(format!("undecodable message: {e}")),
         };
         self.record(Sensor::Laser, now, result)
+    }
+
+    /// A set-up error that should stop the node (the laser does not cover the policy's
+    /// field of view), if one happened.
+    pub fn fatal(&self) -> Option<&str> {
+        self.fatal.as_deref()
     }
 
     /// A depth image arrived (or failed to decode).
@@ -550,6 +573,30 @@ mod tests {
         c.on_odom(t, Ok(&Odometry::default()));
         c.on_scan(t, Ok(&scan(2.0)));
         assert!(c.tick(t, &mut p).0.action.is_some());
+    }
+
+    #[test]
+    fn a_first_scan_that_does_not_cover_270_degrees_is_fatal() {
+        let mut narrow = scan(2.0);
+        narrow.angle_min = -1.5;
+        narrow.angle_increment = 3.0 / 511.0;
+        let mut c = Controller::new(ControllerConfig::default(), true, true);
+        let t = Instant::now();
+        assert!(c.on_scan(t, Ok(&narrow)).is_some_and(|l| l.contains("the scan covers")));
+        assert!(c.fatal().is_some_and(|e| e.contains("−135° to 135°")), "{:?}", c.fatal());
+        // After good scans, a narrow one is an incident (zero velocity), not a set-up error.
+        let mut c = Controller::new(ControllerConfig::default(), true, true);
+        c.on_scan(t, Ok(&scan(2.0)));
+        assert!(c.on_scan(t, Ok(&narrow)).is_some());
+        assert_eq!(c.fatal(), None);
+        let opt_in = ScanOptions { fill_gaps: true, ..ScanOptions::default() };
+        let mut c = Controller::new(
+            ControllerConfig { scan: opt_in, ..ControllerConfig::default() },
+            true,
+            true,
+        );
+        assert_eq!(c.on_scan(t, Ok(&narrow)), None);
+        assert_eq!(c.fatal(), None);
     }
 
     #[test]

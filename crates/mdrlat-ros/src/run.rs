@@ -191,7 +191,12 @@ pub fn run(
     // In scan-triggered mode, a tick without a new scan comes only once the laser is stale.
     let watchdog = period.max(config.controller.stale_after + Duration::from_millis(10));
     let mut summary = RunSummary::default();
+    let mut fatal = None;
     while !stop.load(Ordering::SeqCst) && !node.shutdown_requested() {
+        if let Some(e) = lock(&shared.controller).fatal() {
+            fatal = Some(e.to_string());
+            break;
+        }
         // Wait for this tick's moment.
         match config.trigger {
             Trigger::Timer => {
@@ -274,7 +279,10 @@ pub fn run(
     ));
     node.shutdown();
     summary.seconds = start.elapsed().as_secs_f64();
-    Ok(summary)
+    match fatal {
+        Some(e) => Err(RosError::Config(e)),
+        None => Ok(summary),
+    }
 }
 
 fn publish(publisher: &crate::node::Publisher<Twist>, command: Command) {

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Publishes a synthetic robot (512-beam scan over 270 degrees, 480x640 16UC1 depth,
 odometry) at 10 Hz for argv[1] seconds, as node /feed. Used to kill and restart a publisher
-under a running `mdrlat ros`."""
+under a running `mdrlat ros`. With argv[2] == "narrow" the scan covers 180 degrees only."""
 import math
 import struct
 import sys
@@ -20,6 +20,9 @@ depth = Image(height=480, width=640, encoding="16UC1", step=1280,
 scan = LaserScan(angle_min=-0.75 * math.pi, angle_max=0.75 * math.pi,
                  angle_increment=1.5 * math.pi / 511, range_min=0.1, range_max=8.0,
                  ranges=[2.5] * 512)
+if len(sys.argv) > 2 and sys.argv[2] == "narrow":
+    scan.angle_min, scan.angle_max = -0.5 * math.pi, 0.5 * math.pi
+    scan.angle_increment = math.pi / 511
 odom = Odometry()
 odom.pose.pose.orientation.w = 1.0
 end = time.time() + float(sys.argv[1])
