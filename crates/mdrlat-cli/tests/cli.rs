@@ -259,6 +259,21 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
     assert!(o.status.success(), "{}", stderr(&o));
     let metrics = std::fs::read_to_string(run.join("metrics.csv")).expect("metrics");
     assert!(metrics.lines().last().is_some_and(|l| l.starts_with("150,")), "{metrics}");
+    // `mdrlat ros` loads the run's policy (then fails on the closed port, a clear error).
+    let o = mdrlat(&["ros", "--checkpoint", r, "--master", "http://127.0.0.1:9/"]);
+    let e = stderr(&o);
+    assert!(!o.status.success() && !e.contains("panicked"), "{e}");
+    for needle in
+        ["policy: laser-only network", "(step 150)", "error: ROS master http://127.0.0.1:9/"]
+    {
+        assert!(e.contains(needle), "stderr lacks '{needle}': {e}");
+    }
+    assert_eq!(e.matches("Connection refused").count(), 1, "one cause, once: {e}");
+    let broken = d.join("broken");
+    std::fs::create_dir_all(broken.join("checkpoint")).expect("dir");
+    std::fs::write(broken.join("checkpoint/meta.json"), "{\"format\": 1").expect("write");
+    let o = mdrlat(&["ros", "--checkpoint", broken.to_str().expect("utf8")]);
+    assert_clean_failure(&o, &["meta.json: corrupt"]);
     assert_clean_failure(&mdrlat(&["train", "--resume", r, "--variant", "mdrlat"]), &["--variant"]);
     assert_clean_failure(&mdrlat(&["train", "--variant", "mdrlat2", "--out", r]), &["mdrlat2"]);
     let other = d.join("other");

@@ -29,12 +29,12 @@ const SILENT_LINK: Duration = Duration::from_secs(10);
 #[non_exhaustive]
 pub enum RosError {
     /// The master could not be reached or answered garbage.
-    #[error("ROS master {master}: {source} (is roscore running? check ROS_MASTER_URI / --master)")]
+    #[error("ROS master {master}: {error} (is roscore running? check ROS_MASTER_URI / --master)")]
     Master {
         /// The master URI.
         master: String,
         /// Why.
-        source: XmlRpcError,
+        error: XmlRpcError,
     },
     /// The master refused a call.
     #[error("ROS master {master} refused {method}: {message}")]
@@ -50,20 +50,20 @@ pub enum RosError {
     #[error("{0}")]
     Config(String),
     /// A file (the CSV log) cannot be written.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {error}", path.display())]
     File {
         /// The file.
         path: std::path::PathBuf,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A socket could not be opened.
-    #[error("cannot listen on {host}: {source}")]
+    #[error("cannot listen on {host}: {error}")]
     Listen {
         /// The address.
         host: String,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
 }
 
@@ -157,7 +157,7 @@ impl std::fmt::Debug for Node {
 }
 
 fn bind(host: &str) -> Result<(TcpListener, u16), RosError> {
-    let listen = |source| RosError::Listen { host: host.to_string(), source };
+    let listen = |error| RosError::Listen { host: host.to_string(), error };
     let listener = TcpListener::bind(("0.0.0.0", 0)).map_err(listen)?;
     let port = listener.local_addr().map_err(listen)?.port();
     Ok((listener, port))
@@ -324,7 +324,7 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 /// Calls the master and unpacks ROS's `[code, status, value]` answer.
 fn master_call(master: &str, method: &str, params: &[Value]) -> Result<Value, RosError> {
     let answer = xmlrpc::call(master, method, params)
-        .map_err(|source| RosError::Master { master: master.to_string(), source })?;
+        .map_err(|error| RosError::Master { master: master.to_string(), error })?;
     match answer.as_array() {
         Some([code, status, value]) if code.as_int() == Some(1) => Ok(value.clone()),
         Some([_, status, _]) => Err(RosError::Refused {
@@ -334,7 +334,7 @@ fn master_call(master: &str, method: &str, params: &[Value]) -> Result<Value, Ro
         }),
         _ => Err(RosError::Master {
             master: master.to_string(),
-            source: XmlRpcError::Malformed(format!("{method} answered {answer:?}")),
+            error: XmlRpcError::Malformed(format!("{method} answered {answer:?}")),
         }),
     }
 }

@@ -175,7 +175,7 @@ pub fn run(
     ));
     let mut csv = match &config.log_csv {
         Some(path) => {
-            let io = |source| RosError::File { path: path.clone(), source };
+            let io = |error| RosError::File { path: path.clone(), error };
             let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
             writeln!(f, "t_s,driving,action,cmd_v,cmd_w,odom_v,odom_w").map_err(io)?;
             Some(f)

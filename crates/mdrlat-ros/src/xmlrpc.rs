@@ -111,12 +111,12 @@ pub enum XmlRpcError {
     #[error("bad URL {0:?} (expected http://HOST:PORT/)")]
     Url(String),
     /// The peer could not be reached or the connection broke.
-    #[error("{url}: {source}")]
+    #[error("{url}: {error}")]
     Io {
         /// The peer.
         url: String,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The bytes are not the XML-RPC expected.
     #[error("malformed XML-RPC: {0}")]
@@ -462,7 +462,7 @@ pub fn connect(host: &str, port: u16, timeout: Duration) -> std::io::Result<TcpS
 /// The server cannot be reached, answers garbage, or answers with a fault.
 pub fn call(url: &str, method: &str, params: &[Value]) -> Result<Value, XmlRpcError> {
     let (host, port) = host_port(url)?;
-    let io = |source| XmlRpcError::Io { url: url.to_string(), source };
+    let io = |error| XmlRpcError::Io { url: url.to_string(), error };
     let stream = connect(&host, port, Duration::from_secs(3)).map_err(io)?;
     stream.set_read_timeout(Some(Duration::from_secs(10))).map_err(io)?;
     stream.set_nodelay(true).map_err(io)?;
