@@ -69,7 +69,8 @@ pub enum ScanInf {
 pub enum TriggerKind {
     /// On a fixed clock at --rate-hz.
     Timer,
-    /// On each new scan, at most --rate-hz times per second (lowest latency).
+    /// On each new scan, not sooner than 0.9 / --rate-hz after the last decision (lowest
+    /// latency).
     Scan,
 }
 
