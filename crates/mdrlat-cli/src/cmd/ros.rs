@@ -283,7 +283,8 @@ pub struct SimArgs {
     /// Kobuki base does (commands are also clamped to its 0.7 m/s and 180°/s).
     #[arg(long, default_value_t = 0.5)]
     pub cmd_timeout_s: f32,
-    /// Simulated seconds per wall-clock second.
+    /// Simulated seconds per wall-clock second (a policy node deciding at 5 Hz of wall time
+    /// then acts every speed × 0.2 s of simulated time: keep 1 for a faithful test).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f32,
     /// Stop after this many wall-clock seconds (0: run until Ctrl-C).
