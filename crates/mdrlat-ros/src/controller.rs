@@ -380,7 +380,7 @@ impl Controller {
                 }
             }
             // A slow decision may have outlived its inputs' freshness.
-            let after = now + started.elapsed();
+            let after = (now + started.elapsed()).max(Instant::now());
             if action.is_some() {
                 stops.extend(self.sensor_stops(after));
             }

@@ -111,7 +111,15 @@ pub fn resample_scan(
     let inc = scan.angle_increment;
     // A usable fan: at least two beams, finite angles, an increment above 0.0001° (a
     // degenerate increment would make one output bin span billions of source beams).
-    if n < 2 || !scan.angle_min.is_finite() || !inc.is_finite() || inc.abs() < MIN_INCREMENT {
+    // And no more than one turn (an increment in degrees read as radians would otherwise
+    // pass as a 360° scan), from a sane start angle.
+    if n < 2
+        || !scan.angle_min.is_finite()
+        || scan.angle_min.abs() > 2.0 * TAU
+        || !inc.is_finite()
+        || inc.abs() < MIN_INCREMENT
+        || (n - 1) as f32 * inc.abs() > TAU + inc.abs()
+    {
         return Err(ScanError::Geometry { angle_min: scan.angle_min, angle_increment: inc });
     }
     let cap = if scan.range_max.is_finite() && scan.range_max > 0.0 {
@@ -151,6 +159,9 @@ pub fn resample_scan(
     // Every angle is measured from the first beam, counter-clockwise, in [0, 2π): a scan
     // that starts anywhere (0..2π, −π..π, turned by the mounting yaw) is read the same.
     let full_circle = TAU - n as f32 * step <= MAX_BRIDGED_GAP;
+    // Indices wrap only where the beams really tile the turn; across a bridged gap they
+    // stop at the beam on the gap's near side.
+    let tiles = (n as f32 * step - TAU).abs() < step / 2.0;
     let bin = (mdrlat_core::LASER_FOV_DEG.to_radians() / (LASER_BEAMS - 1) as f32) / 2.0;
     let half = bin / step; // half a target bin, in source beams
     let mut missing = 0;
@@ -179,7 +190,7 @@ pub fn resample_scan(
         };
         let mut best = f32::INFINITY;
         for j in lo..=hi {
-            let idx = if full_circle {
+            let idx = if tiles {
                 j.rem_euclid(n as i64) as usize
             } else {
                 j.clamp(0, n as i64 - 1) as usize
@@ -442,6 +453,9 @@ mod tests {
             scan(0.0, f32::MIN_POSITIVE, vec![1.0; 3]),
             scan(0.0, 0.01, vec![1.0]),
             scan(f32::NAN, 0.01, vec![1.0; 10]),
+            scan(1e10, 0.01, vec![1.0; 10]),
+            // A 270° laser whose increment is in degrees (0.25) read as radians.
+            scan(-2.356, 0.25, vec![1.0; 1081]),
         ] {
             let e = resample_scan(
                 &s,

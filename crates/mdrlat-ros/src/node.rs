@@ -466,22 +466,28 @@ fn decode_header(body: &[u8]) -> HashMap<String, String> {
 fn connect_publishers(inner: &Arc<Inner>, topic: &str, uris: &[String]) {
     let subs = lock(&inner.subscriptions);
     let Some(sub) = subs.iter().find(|s| s.topic == topic) else { return };
+    // Lock order: `connected`, then `listed` (as a link thread deciding to leave).
+    let mut connected = lock(&sub.connected);
     *lock(&sub.listed) = uris.to_vec();
     for uri in uris {
-        {
-            let mut connected = lock(&sub.connected);
-            if connected.contains(uri) {
-                continue;
-            }
-            connected.push(uri.clone());
+        if connected.contains(uri) {
+            continue;
         }
         let job = SubscriberLink {
             node: Arc::downgrade(inner),
             callerid: inner.name.clone(),
             sub: sub.clone(),
             publisher: uri.clone(),
+            left: true, // until it runs: its spawn may fail
         };
-        let _ = std::thread::Builder::new().name("tcpros-sub".into()).spawn(move || job.run());
+        let started = std::thread::Builder::new().name("tcpros-sub".into()).spawn(move || {
+            let mut job = job;
+            job.left = false;
+            job.run();
+        });
+        if started.is_ok() {
+            connected.push(uri.clone());
+        }
     }
 }
 
@@ -491,6 +497,16 @@ struct SubscriberLink {
     callerid: String,
     sub: Arc<Subscription>,
     publisher: String,
+    /// Removed itself from `connected` (on a panic in the callback it has not).
+    left: bool,
+}
+
+impl Drop for SubscriberLink {
+    fn drop(&mut self) {
+        if !self.left {
+            lock(&self.sub.connected).retain(|u| u != &self.publisher);
+        }
+    }
 }
 
 impl SubscriberLink {
@@ -501,10 +517,21 @@ impl SubscriberLink {
             && lock(&self.sub.listed).contains(&self.publisher)
     }
 
-    fn run(self) {
+    fn run(mut self) {
         let mut backoff = Duration::from_millis(250);
         let mut failing = false;
-        while self.wanted() {
+        loop {
+            {
+                // Leaving is decided and recorded under `connected`, the lock
+                // `connect_publishers` holds while it reads `listed`: a publisher re-listed
+                // at this moment either keeps this link or gets a new one, never neither.
+                let mut connected = lock(&self.sub.connected);
+                if !self.wanted() {
+                    connected.retain(|u| u != &self.publisher);
+                    self.left = true;
+                    return;
+                }
+            }
             match self.receive() {
                 Ok(received) => {
                     if received {
@@ -529,7 +556,6 @@ impl SubscriberLink {
             std::thread::sleep(backoff);
             backoff = (backoff * 2).min(Duration::from_secs(5));
         }
-        lock(&self.sub.connected).retain(|u| u != &self.publisher);
     }
 
     /// One connection: requestTopic, handshake, then messages until the link ends.
@@ -616,7 +642,11 @@ fn accept_subscribers(
 ) {
     let header = Arc::new(header);
     let _ = std::thread::Builder::new().name("tcpros-accept".into()).spawn(move || {
-        for stream in listener.incoming().flatten() {
+        for stream in listener.incoming() {
+            let Ok(stream) = stream else {
+                std::thread::sleep(Duration::from_millis(100)); // e.g. out of file descriptors
+                continue;
+            };
             let (header, links, latched) = (header.clone(), links.clone(), latched.clone());
             let _ = std::thread::Builder::new()
                 .name("tcpros-pub".into())
@@ -660,6 +690,8 @@ fn serve_subscriber(
         return;
     }
     let _ = stream.set_nodelay(request.get("tcp_nodelay").is_none_or(|v| v == "1"));
+    // A subscriber that stops reading loses its link instead of holding a writer forever.
+    let _ = stream.set_write_timeout(Some(Duration::from_secs(2)));
     let link: Link = Arc::default();
     if header.latch
         && let Some(last) = lock(latched).clone()

@@ -125,7 +125,8 @@ pub fn run(
     if uses_laser {
         let (s, tx) = (shared.clone(), tx.clone());
         node.subscribe::<LaserScan>(&config.scan_topic, move |msg| {
-            let line = lock(&s.controller).on_scan(Instant::now(), msg.as_ref());
+            let arrived = Instant::now(); // before waiting for the lock
+            let line = lock(&s.controller).on_scan(arrived, msg.as_ref());
             if let Some(l) = line {
                 let _ = tx.send(format!("{}: {l}", "scan"));
             }
@@ -136,7 +137,8 @@ pub fn run(
     if uses_depth {
         let (s, tx) = (shared.clone(), tx.clone());
         node.subscribe::<Image>(&config.depth_topic, move |msg| {
-            if let Some(l) = lock(&s.controller).on_depth(Instant::now(), msg.as_ref()) {
+            let arrived = Instant::now();
+            if let Some(l) = lock(&s.controller).on_depth(arrived, msg.as_ref()) {
                 let _ = tx.send(format!("depth: {l}"));
             }
         })?;
@@ -144,7 +146,8 @@ pub fn run(
     if config.controller.require_odom {
         let (s, tx) = (shared.clone(), tx.clone());
         node.subscribe::<Odometry>(&config.odom_topic, move |msg| {
-            if let Some(l) = lock(&s.controller).on_odom(Instant::now(), msg.as_ref()) {
+            let arrived = Instant::now();
+            if let Some(l) = lock(&s.controller).on_odom(arrived, msg.as_ref()) {
                 let _ = tx.send(format!("odom: {l}"));
             }
         })?;

@@ -488,7 +488,11 @@ pub fn serve(listener: TcpListener, handler: Handler) {
     std::thread::Builder::new()
         .name("xmlrpc".into())
         .spawn(move || {
-            for stream in listener.incoming().flatten() {
+            for stream in listener.incoming() {
+                let Ok(stream) = stream else {
+                    std::thread::sleep(Duration::from_millis(100)); // e.g. out of descriptors
+                    continue;
+                };
                 let handler = handler.clone();
                 let _ = std::thread::Builder::new()
                     .name("xmlrpc-conn".into())
