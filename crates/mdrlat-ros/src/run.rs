@@ -112,6 +112,16 @@ pub fn run(
         scans: Mutex::new(0),
         scan_arrived: Condvar::new(),
     });
+    // The log file first: a bad path fails before the node registers anywhere.
+    let mut csv = match &config.log_csv {
+        Some(path) => {
+            let io = |error| RosError::File { path: path.clone(), error };
+            let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
+            writeln!(f, "t_s,driving,action,cmd_v,cmd_w,odom_v,odom_w").map_err(io)?;
+            Some(f)
+        }
+        None => None,
+    };
     let node = Node::new(&config.name, &config.master, &config.host)?;
     let cmd = node.advertise::<Twist>(&config.cmd_topic, false)?;
     let log_line = |line: Option<String>| {
@@ -128,7 +138,7 @@ pub fn run(
             let arrived = Instant::now(); // before waiting for the lock
             let line = lock(&s.controller).on_scan(arrived, msg.as_ref());
             if let Some(l) = line {
-                let _ = tx.send(format!("{}: {l}", "scan"));
+                let _ = tx.send(l);
             }
             *lock(&s.scans) += 1;
             s.scan_arrived.notify_all();
@@ -139,7 +149,7 @@ pub fn run(
         node.subscribe::<Image>(&config.depth_topic, move |msg| {
             let arrived = Instant::now();
             if let Some(l) = lock(&s.controller).on_depth(arrived, msg.as_ref()) {
-                let _ = tx.send(format!("depth: {l}"));
+                let _ = tx.send(l);
             }
         })?;
     }
@@ -148,7 +158,7 @@ pub fn run(
         node.subscribe::<Odometry>(&config.odom_topic, move |msg| {
             let arrived = Instant::now();
             if let Some(l) = lock(&s.controller).on_odom(arrived, msg.as_ref()) {
-                let _ = tx.send(format!("odom: {l}"));
+                let _ = tx.send(l);
             }
         })?;
     }
@@ -176,15 +186,6 @@ pub fn run(
         limits.max_angular_radps,
         limits.stale_after.as_secs_f32(),
     ));
-    let mut csv = match &config.log_csv {
-        Some(path) => {
-            let io = |error| RosError::File { path: path.clone(), error };
-            let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
-            writeln!(f, "t_s,driving,action,cmd_v,cmd_w,odom_v,odom_w").map_err(io)?;
-            Some(f)
-        }
-        None => None,
-    };
     let period = Duration::from_secs_f64(1.0 / f64::from(config.rate_hz.max(0.1)));
     let start = Instant::now();
     let mut next = start;
