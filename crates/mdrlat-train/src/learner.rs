@@ -170,8 +170,14 @@ impl Learner {
     fn targets(&self, batch: &Batch) -> Tensor<2> {
         let b = batch.size;
         let (nl, nd) = self.inputs::<false>(&batch.next_laser, &batch.next_depth, b);
-        let best_next = self.plain.forward(nl.clone(), nd.clone(), None).q.argmax(1); // [B, 1]
-        let q_next = self.target.forward(nl, nd, None).q.gather(1, best_next); // [B, 1]
+        // The two forwards are independent: on the CPU each leaves a core idle in its
+        // single-threaded stretches, so they run side by side.
+        let (online_next, target_next) = rayon::join(
+            || self.plain.forward(nl.clone(), nd.clone(), None).q,
+            || self.target.forward(nl.clone(), nd.clone(), None).q,
+        );
+        let best_next = online_next.argmax(1); // [B, 1]
+        let q_next = target_next.gather(1, best_next); // [B, 1]
         let rewards =
             Tensor::<2>::from_data(TensorData::new(batch.rewards.clone(), [b, 1]), &self.device);
         let alive: Vec<f32> = batch.terminated.iter().map(|t| 1.0 - t).collect();
