@@ -200,11 +200,18 @@ impl Learner {
     /// One gradient step on a sampled batch (Algorithm 1, lines 7–15).
     pub fn update(&mut self, batch: &Batch) -> Losses {
         let b = batch.size;
-        let y = Tensor::<2>::from_data(self.targets(batch).into_data(), &self.train_device);
+        // Lines 10–11 (targets, no autodiff) and the online forward of line 12 do not depend
+        // on each other: they run side by side.
+        let (y, out) = rayon::join(
+            || self.targets(batch),
+            || {
+                let (l, d) = self.inputs::<true>(&batch.laser, &batch.depth, b);
+                self.online.forward(l, d, None)
+            },
+        );
+        let y = Tensor::<2>::from_data(y.into_data(), &self.train_device);
 
         // Line 12, eq. (13): (y − Q(s, a))².
-        let (l, d) = self.inputs::<true>(&batch.laser, &batch.depth, b);
-        let out = self.online.forward(l, d, None);
         let actions = Tensor::<2, Int>::from_data(
             TensorData::new(batch.actions.clone(), [b, 1]),
             &self.train_device,
