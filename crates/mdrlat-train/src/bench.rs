@@ -130,16 +130,20 @@ pub fn profile(
     let (targets, _) = median_ms(min_time, || {
         learner.td_targets(&b);
     });
+    let mut phases: [Vec<f64>; 3] = Default::default();
     let (step, _) = median_ms(min_time, || {
         learner.update(&b);
+        for (v, ms) in phases.iter_mut().zip(learner.phase_times()) {
+            v.push(ms);
+        }
     });
+    let [mut p0, mut p1, mut p2] = phases;
     out.push(("= forward with autodiff, one pass".into(), forward));
     out.push(("= backward, stage by stage".into(), backward));
-    out.push(("target forwards (eq. 10, 2 passes)".into(), targets));
-    out.push((
-        "rest: losses, Adam, bookkeeping".into(),
-        (step - targets - forward - backward).max(0.0),
-    ));
+    out.push(("target forwards (eq. 10, 2 passes, side by side)".into(), targets));
+    out.push(("step phase 1: targets beside the online forward".into(), median(&mut p0)));
+    out.push(("step phase 2: losses and backward".into(), median(&mut p1)));
+    out.push(("step phase 3: Adam (and a plain copy of the net)".into(), median(&mut p2)));
     out.push(("= gradient step".into(), step));
     out
 }

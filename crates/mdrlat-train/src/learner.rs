@@ -50,6 +50,8 @@ pub struct Learner {
     learning_rate: f64,
     aux_weight: f32,
     updates: u64,
+    /// See [`Learner::phase_times`].
+    phase_ms: [f64; 3],
 }
 
 impl std::fmt::Debug for Learner {
@@ -122,6 +124,7 @@ impl Learner {
             learning_rate: config.learning_rate,
             aux_weight: config.aux_loss_weight,
             updates: 0,
+            phase_ms: [0.0; 3],
         }
     }
 
@@ -197,19 +200,31 @@ impl Learner {
         self.target.forward(nl, nd, None).q.into_data().try_to_vec::<f32>().unwrap_or_default()
     }
 
+    /// Lines 10–11 (targets, no autodiff) and the online forward of line 12 (with autodiff):
+    /// they do not depend on each other, so they run side by side.
+    fn targets_and_forward(&self, batch: &Batch) -> (Tensor<2>, mdrlat_nn::QOutput) {
+        rayon::join(
+            || self.targets(batch),
+            || {
+                let (l, d) = self.inputs::<true>(&batch.laser, &batch.depth, batch.size);
+                self.online.forward(l, d, None)
+            },
+        )
+    }
+
+    /// Milliseconds of the last gradient step's three phases: targets beside the online
+    /// forward (lines 10–12), the losses and backward pass, the Adam step (line 15).
+    pub fn phase_times(&self) -> [f64; 3] {
+        self.phase_ms
+    }
+
     /// One gradient step on a sampled batch (Algorithm 1, lines 7–15).
     pub fn update(&mut self, batch: &Batch) -> Losses {
         let b = batch.size;
-        // Lines 10–11 (targets, no autodiff) and the online forward of line 12 do not depend
-        // on each other: they run side by side.
-        let (y, out) = rayon::join(
-            || self.targets(batch),
-            || {
-                let (l, d) = self.inputs::<true>(&batch.laser, &batch.depth, b);
-                self.online.forward(l, d, None)
-            },
-        );
+        let t0 = std::time::Instant::now();
+        let (y, out) = self.targets_and_forward(batch);
         let y = Tensor::<2>::from_data(y.into_data(), &self.train_device);
+        let t1 = std::time::Instant::now();
 
         // Line 12, eq. (13): (y − Q(s, a))².
         let actions = Tensor::<2, Int>::from_data(
@@ -236,8 +251,11 @@ impl Learner {
         };
         // Line 15: one Adam step on the online network.
         let grads = GradientsParams::from_grads(loss.backward(), &self.online);
+        let t2 = std::time::Instant::now();
         self.online = self.optim.step(self.learning_rate, self.online.clone(), grads);
         self.plain = self.online.valid();
+        let ms = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64() * 1e3;
+        self.phase_ms = [ms(t0, t1), ms(t1, t2), ms(t2, std::time::Instant::now())];
         self.updates += 1;
         Losses { td: td_value, at: at_value, q_mean }
     }

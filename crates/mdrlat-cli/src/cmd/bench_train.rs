@@ -94,7 +94,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         } else {
             out!("\nwhere a {} step goes (batch {}):", v.name(), a.batch);
             for (stage, ms) in &rows {
-                out!("  {stage:<36} {ms:>8.1} ms");
+                out!("  {stage:<52} {ms:>8.1} ms");
             }
         }
     }
