@@ -52,6 +52,10 @@ pub struct Learner {
     updates: u64,
     /// See [`Learner::phase_times`].
     phase_ms: [f64; 3],
+    /// Independent forwards run on two threads: on burn's `flex` CPU backend each leaves a
+    /// core idle in its single-threaded stretches (MDRLAT step 130 → 110 ms on 2 cores);
+    /// LibTorch already spreads every kernel over all cores and only oversubscribes.
+    side_by_side: bool,
 }
 
 impl std::fmt::Debug for Learner {
@@ -107,6 +111,7 @@ impl Learner {
     /// copy (Algorithm 1, line 1).
     pub fn new(config: &TrainConfig, device: &Device) -> Self {
         let device = device.clone();
+        let side_by_side = device == Device::flex();
         let train_device = device.clone().autodiff();
         let online = QNetConfig::new(config.variant).init_seeded(&train_device, config.seed);
         let target = online.valid();
@@ -125,6 +130,7 @@ impl Learner {
             aux_weight: config.aux_loss_weight,
             updates: 0,
             phase_ms: [0.0; 3],
+            side_by_side,
         }
     }
 
@@ -173,9 +179,7 @@ impl Learner {
     fn targets(&self, batch: &Batch) -> Tensor<2> {
         let b = batch.size;
         let (nl, nd) = self.inputs::<false>(&batch.next_laser, &batch.next_depth, b);
-        // The two forwards are independent: on the CPU each leaves a core idle in its
-        // single-threaded stretches, so they run side by side.
-        let (online_next, target_next) = rayon::join(
+        let (online_next, target_next) = self.both(
             || self.plain.forward(nl.clone(), nd.clone(), None).q,
             || self.target.forward(nl.clone(), nd.clone(), None).q,
         );
@@ -200,10 +204,20 @@ impl Learner {
         self.target.forward(nl, nd, None).q.into_data().try_to_vec::<f32>().unwrap_or_default()
     }
 
+    /// Runs two independent computations, side by side where that pays (see
+    /// `side_by_side`).
+    fn both<A: Send, B: Send>(
+        &self,
+        a: impl FnOnce() -> A + Send,
+        b: impl FnOnce() -> B + Send,
+    ) -> (A, B) {
+        if self.side_by_side { rayon::join(a, b) } else { (a(), b()) }
+    }
+
     /// Lines 10–11 (targets, no autodiff) and the online forward of line 12 (with autodiff):
     /// they do not depend on each other, so they run side by side.
     fn targets_and_forward(&self, batch: &Batch) -> (Tensor<2>, mdrlat_nn::QOutput) {
-        rayon::join(
+        self.both(
             || self.targets(batch),
             || {
                 let (l, d) = self.inputs::<true>(&batch.laser, &batch.depth, batch.size);
