@@ -141,7 +141,10 @@ pub fn profile(
     out.push(("= forward with autodiff, one pass".into(), forward));
     out.push(("= backward, stage by stage".into(), backward));
     out.push(("target forwards (eq. 10, 2 passes; side by side on flex)".into(), targets));
-    out.push(("step phase 1: targets + online forward (side by side on flex)".into(), median(&mut p0)));
+    out.push((
+        "step phase 1: targets + online forward (side by side on flex)".into(),
+        median(&mut p0),
+    ));
     out.push(("step phase 2: losses and backward".into(), median(&mut p1)));
     out.push(("step phase 3: Adam (and a plain copy of the net)".into(), median(&mut p2)));
     out.push(("= gradient step".into(), step));
