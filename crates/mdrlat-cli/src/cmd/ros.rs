@@ -257,6 +257,16 @@ pub enum DepthEncoding {
     U16,
 }
 
+impl DepthEncoding {
+    /// The ROS encoding name.
+    fn name(self) -> &'static str {
+        match self {
+            DepthEncoding::F32 => "32FC1",
+            DepthEncoding::U16 => "16UC1",
+        }
+    }
+}
+
 /// Arguments of `mdrlat ros-sim`.
 #[derive(Debug, clap::Args)]
 pub struct SimArgs {
@@ -362,12 +372,12 @@ pub fn sim(a: &SimArgs) -> Result<()> {
         })?;
     }
     eprintln!(
-        "[mdrlat ros-sim] world {} on {}: publishing {}, {} ({:?}), {}; driving from {}",
+        "[mdrlat ros-sim] world {} on {}: publishing {}, {} ({}), {}; driving from {}",
         env.world().name,
         node.master(),
         a.topics.scan_topic,
         a.topics.depth_topic,
-        a.depth_encoding,
+        a.depth_encoding.name(),
         a.topics.odom_topic,
         a.topics.cmd_topic
     );
@@ -538,10 +548,7 @@ impl SimSensors {
             header: header("camera_depth_optical_frame"),
             height: DEPTH_ROWS as u32,
             width: DEPTH_COLS as u32,
-            encoding: match self.encoding {
-                DepthEncoding::F32 => "32FC1".into(),
-                DepthEncoding::U16 => "16UC1".into(),
-            },
+            encoding: self.encoding.name().into(),
             is_bigendian: 0,
             step: (DEPTH_COLS * step) as u32,
             data,
