@@ -253,6 +253,7 @@ fn policy_drives_the_simulator_over_ros() {
         master
             .command(BIN)
             .args(["ros-sim", "--world", "train", "--seed", "1", "--duration-s", "6"])
+            .args(["--depth-encoding", "16UC1"])
             .arg("--log")
             .arg(&traj)
             .arg("--picture")
@@ -272,7 +273,7 @@ fn policy_drives_the_simulator_over_ros() {
     let mut node = Guard(
         master
             .command(BIN)
-            .args(["ros", "--untrained", "--variant", "laser-only", "--seed", "5"])
+            .args(["ros", "--untrained", "--variant", "multi", "--seed", "5"])
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .spawn()
@@ -289,7 +290,8 @@ fn policy_drives_the_simulator_over_ros() {
     assert!((heard["scan"]["last"]["angle_max"].as_f64().unwrap() - 2.356).abs() < 1e-3);
     assert_eq!(heard["depth"]["last"]["h"], 128);
     assert_eq!(heard["depth"]["last"]["w"], 160);
-    assert_eq!(heard["depth"]["last"]["bytes"], 128 * 640);
+    assert_eq!(heard["depth"]["last"]["enc"], "16UC1");
+    assert_eq!(heard["depth"]["last"]["bytes"], 128 * 320);
     assert_eq!(heard["odom"]["last"]["child"], "base_footprint");
     let status = wait_exit(&mut sim.0, Duration::from_secs(30));
     assert!(status.success(), "ros-sim: {status}");
