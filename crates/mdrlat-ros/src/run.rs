@@ -2,7 +2,7 @@
 
 use crate::controller::{Command, Controller, ControllerConfig, Policy};
 use crate::msg::{Image, LaserScan, Odometry, Twist};
-use crate::node::{Node, RosError};
+use crate::node::{Node, RosError, lock};
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -82,10 +82,6 @@ struct Shared {
     /// Bumped on each new scan, for [`Trigger::Scan`].
     scans: Mutex<u64>,
     scan_arrived: Condvar,
-}
-
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// Runs the node until `stop` is set (SIGINT/SIGTERM) or the master asks it to shut down;
