@@ -178,6 +178,24 @@ pub fn save(
     Ok(())
 }
 
+/// Reads and checks the `meta.json` of the checkpoint folder `dir`.
+///
+/// # Errors
+/// Missing, unreadable or corrupt, or another format version.
+pub fn read_meta(dir: &Path) -> Result<Meta, TrainError> {
+    let meta_path = dir.join("meta.json");
+    let text = std::fs::read_to_string(&meta_path).map_err(|e| bad(&meta_path, e.to_string()))?;
+    let meta: Meta =
+        serde_json::from_str(&text).map_err(|e| bad(&meta_path, format!("corrupt: {e}")))?;
+    if meta.format != CHECKPOINT_FORMAT {
+        return Err(bad(
+            &meta_path,
+            format!("format {} (this build reads {CHECKPOINT_FORMAT})", meta.format),
+        ));
+    }
+    Ok(meta)
+}
+
 /// Reads the checkpoint of `run_dir` for a run with `config`.
 ///
 /// # Errors
@@ -195,16 +213,8 @@ pub fn load(
     if !dir.is_dir() {
         return Err(bad(&dir, "no checkpoint to resume from (none was written yet?)"));
     }
+    let meta = read_meta(&dir)?;
     let meta_path = dir.join("meta.json");
-    let text = std::fs::read_to_string(&meta_path).map_err(|e| bad(&meta_path, e.to_string()))?;
-    let meta: Meta =
-        serde_json::from_str(&text).map_err(|e| bad(&meta_path, format!("corrupt: {e}")))?;
-    if meta.format != CHECKPOINT_FORMAT {
-        return Err(bad(
-            &meta_path,
-            format!("format {} (this build reads {CHECKPOINT_FORMAT})", meta.format),
-        ));
-    }
     if meta.variant != config.variant {
         return Err(bad(
             &meta_path,

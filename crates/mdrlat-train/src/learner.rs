@@ -67,12 +67,13 @@ impl std::fmt::Debug for Learner {
     }
 }
 
-fn tensor3(data: &[f32], b: usize, device: &Device) -> Tensor<3> {
+/// Laser stacks `[B, 4, 512]` as a tensor.
+pub(crate) fn tensor3(data: &[f32], b: usize, device: &Device) -> Tensor<3> {
     Tensor::from_data(TensorData::new(data.to_vec(), [b, FRAME_STACK, LASER_BEAMS]), device)
 }
 
 /// Depth stacks `[B, 4, 128, 160]` as the network's patch input (see `mdrlat_nn::patches`).
-fn tensor4(data: &[f32], b: usize, device: &Device) -> Tensor<4> {
+pub(crate) fn tensor4(data: &[f32], b: usize, device: &Device) -> Tensor<4> {
     mdrlat_nn::depth_patches(data, b, DEPTH_ROWS, DEPTH_COLS, device)
 }
 

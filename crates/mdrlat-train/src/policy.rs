@@ -1,9 +1,9 @@
 //! A network that acts: greedy decisions on one observation at a time, from a trained run
 //! or freshly initialised, for `mdrlat ros` and anything else that deploys a policy.
 
-use crate::checkpoint::{CHECKPOINT_FORMAT, Meta};
-use crate::learner::{argmax, read_net};
-use mdrlat_core::{DEPTH_COLS, DEPTH_LEN, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS};
+use crate::checkpoint::read_meta;
+use crate::learner::{argmax, read_net, tensor3, tensor4};
+use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS};
 use mdrlat_nn::burn::prelude::*;
 use mdrlat_nn::{QNet, QNetConfig, Variant};
 use std::path::{Path, PathBuf};
@@ -58,18 +58,7 @@ impl GreedyPolicy {
     /// do not fit the variant it names.
     pub fn load(path: &Path, device: &Device, threads: usize) -> Result<Self, String> {
         let dir = checkpoint_dir(path)?;
-        let meta_path = dir.join("meta.json");
-        let text = std::fs::read_to_string(&meta_path)
-            .map_err(|e| format!("{}: {e}", meta_path.display()))?;
-        let meta: Meta = serde_json::from_str(&text)
-            .map_err(|e| format!("{}: corrupt: {e}", meta_path.display()))?;
-        if meta.format != CHECKPOINT_FORMAT {
-            return Err(format!(
-                "{}: checkpoint format {} (this build reads {CHECKPOINT_FORMAT})",
-                meta_path.display(),
-                meta.format
-            ));
-        }
+        let meta = read_meta(&dir).map_err(|e| e.to_string())?;
         let mut net = QNetConfig::new(meta.variant).init(device);
         read_net(&mut net, &dir.join("online.bpk"), meta.variant)?;
         Ok(Self {
@@ -125,15 +114,8 @@ impl GreedyPolicy {
             return Err(format!("depth input has {} values, expected 4 x 128 x 160", depth.len()));
         }
         self.pool.install(|| {
-            let l = v.uses_laser().then(|| {
-                Tensor::<3>::from_data(
-                    TensorData::new(laser.to_vec(), [1, FRAME_STACK, LASER_BEAMS]),
-                    &self.device,
-                )
-            });
-            let d = v
-                .uses_depth()
-                .then(|| mdrlat_nn::depth_patches(depth, 1, DEPTH_ROWS, DEPTH_COLS, &self.device));
+            let l = v.uses_laser().then(|| tensor3(laser, 1, &self.device));
+            let d = v.uses_depth().then(|| tensor4(depth, 1, &self.device));
             let q = self.net.forward(l, d, None).q;
             q.into_data().try_to_vec::<f32>().map_err(|e| format!("reading Q-values: {e:?}"))
         })
