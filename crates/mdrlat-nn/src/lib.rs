@@ -21,7 +21,10 @@ mod net;
 pub mod patches;
 mod variant;
 
-pub use net::{QNet, QNetConfig, QOutput, StageTime, bilinear, depth_patches, dueling};
+pub use net::{
+    QNet, QNetConfig, QOutput, StageTime, bilinear, depth_input, depth_patches, dueling,
+    prefers_depth_patches,
+};
 pub use variant::{Variant, VariantParseError};
 
 /// The burn re-exports the rest of mdrlat builds on, so every crate uses the same version.

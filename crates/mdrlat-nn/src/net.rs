@@ -135,26 +135,57 @@ pub struct DepthStream {
 
 impl DepthStream {
     /// # Shapes
-    /// `patches: [B, 16, 20, 560]` (see [`depth_patches`]) → `[B, 2560]`.
-    fn forward(&self, patches: Tensor<4>) -> Tensor<2> {
-        let [b, oh, ow, k] = patches.dims();
+    /// `x`: the depth stacks `[B, 4, 128, 160]`, or their first-layer patches
+    /// `[B, 16, 20, 560]` (see [`depth_input`]) → `[B, 2560]`.
+    fn forward(&self, x: Tensor<4>) -> Tensor<2> {
         let weight = self.c1.weight.val(); // [16, 4, 10, 14]
-        let filters = weight.dims()[0];
-        let weight = weight.reshape([filters, k]).transpose(); // [560, 16]
-        let x = patches.reshape([b * oh * ow, k]).matmul(weight); // [B·16·20, 16]
-        let x = match &self.c1.bias {
-            Some(bias) => x + bias.val().unsqueeze_dim::<2>(0), // [1, 16]
-            None => x,
+        let [filters, frames, kh, kw] = weight.dims();
+        let [b, d1, d2, d3] = x.dims();
+        let x = if d1 == frames && d3 != frames * kh * kw {
+            self.c1.forward(x) // [B, 16, 16, 20]
+        } else {
+            let k = d3;
+            let weight = weight.reshape([filters, k]).transpose(); // [560, 16]
+            let x = x.reshape([b * d1 * d2, k]).matmul(weight); // [B·16·20, 16]
+            let x = match &self.c1.bias {
+                Some(bias) => x + bias.val().unsqueeze_dim::<2>(0), // [1, 16]
+                None => x,
+            };
+            x.reshape([b, d1, d2, filters]).permute([0, 3, 1, 2]) // [B, 16, 16, 20]
         };
-        let x = relu(x.reshape([b, oh, ow, filters]).permute([0, 3, 1, 2])); // [B, 16, 16, 20]
-        let x = relu(self.c2.forward(x)); // [B, 32, 8, 10]
+        let x = relu(self.c2.forward(relu(x))); // [B, 32, 8, 10]
         let x = relu(self.c3.forward(x)); // [B, 32, 8, 10]
         x.flatten(1, 3) // [B, 2560]
     }
 }
 
-/// The depth network input: the first convolution's SAME-padded patches of a batch of
-/// normalised `[B, frames, rows, cols]` depth stacks, as `[B, out_rows, out_cols, 560]`
+/// Whether the depth stream's first layer should be fed patches cut on the host (burn's
+/// `flex` CPU backend, whose direct convolution is slow) rather than the stacks themselves
+/// (LibTorch and the GPUs convolve well, and patches are 2.2× the bytes to move).
+pub fn prefers_depth_patches(device: &Device) -> bool {
+    device.clone().inner() == Device::flex()
+}
+
+/// The depth network input of a batch of normalised `[B, frames, rows, cols]` depth
+/// stacks on `device`: the stacks as a tensor, or on `flex` the first convolution's
+/// SAME-padded patches (see [`prefers_depth_patches`], [`depth_patches`]). The depth stream
+/// takes either, with the same result.
+pub fn depth_input(
+    stacks: &[f32],
+    batch: usize,
+    rows: usize,
+    cols: usize,
+    device: &Device,
+) -> Tensor<4> {
+    if prefers_depth_patches(device) {
+        return depth_patches(stacks, batch, rows, cols, device);
+    }
+    let frames = stacks.len() / (batch * rows * cols).max(1);
+    Tensor::from_data(TensorData::new(stacks.to_vec(), [batch, frames, rows, cols]), device)
+}
+
+/// The first convolution's SAME-padded patches of a batch of normalised
+/// `[B, frames, rows, cols]` depth stacks, as `[B, out_rows, out_cols, 560]`
 /// (`[B, 16, 20, 560]` at 128 x 160). See the `patches` module for why.
 pub fn depth_patches(
     stacks: &[f32],
@@ -281,8 +312,8 @@ impl QNet {
     /// The representation `h = concat(depth features, fusion, laser features, goal)`.
     ///
     /// # Shapes
-    /// `laser: [B, 4, 512]`, `depth: [B, 16, 20, 560]` patches of `[B, 4, 128, 160]` from
-    /// [`depth_patches`] (each when the variant reads it), `goal: [B, goal_dim]` → `[B, h]`.
+    /// `laser: [B, 4, 512]`, `depth: [B, 4, 128, 160]` or its patches `[B, 16, 20, 560]`
+    /// (see [`depth_input`]; each when the variant reads it), `goal: [B, goal_dim]` → `[B, h]`.
     ///
     /// # Panics
     /// If an input the variant needs is missing.
@@ -401,6 +432,28 @@ mod tests {
         );
         assert_eq!(d.len(), p.len());
         let worst = d.iter().zip(&p).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "max difference {worst}");
+    }
+
+    /// The network gives the same Q-values whichever depth input form it is fed.
+    #[test]
+    fn stacks_and_patches_give_the_same_q_values() {
+        let dev = Device::flex();
+        let net = QNetConfig::new(Variant::Mdrlat).init_seeded(&dev, 3);
+        let mut rng = mdrlat_core::Rng::seed_from_u64(2);
+        let raw: Vec<f32> = (0..2 * 4 * 128 * 160).map(|_| rng.uniform() as f32).collect();
+        let laser: Vec<f32> = (0..2 * 4 * 512).map(|_| rng.uniform() as f32).collect();
+        let laser = Tensor::<3>::from_data(TensorData::new(laser, [2, 4, 512]), &dev);
+        let stacks = Tensor::<4>::from_data(TensorData::new(raw.clone(), [2, 4, 128, 160]), &dev);
+        assert!(prefers_depth_patches(&dev) && prefers_depth_patches(&dev.clone().autodiff()));
+        let patches = depth_input(&raw, 2, 128, 160, &dev);
+        assert_eq!(patches.dims(), [2, 16, 20, 560]);
+        let q = |d: Tensor<4>| {
+            let out = net.forward(Some(laser.clone()), Some(d), None).q;
+            out.into_data().try_to_vec::<f32>().expect("f32")
+        };
+        let (a, b) = (q(stacks), q(patches));
+        let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
         assert!(worst < 1e-4, "max difference {worst}");
     }
 }

@@ -7,6 +7,8 @@
 //! the backend's GEMM handles well, forward and backward. The weight keeps its
 //! `[16, 4, 10, 14]` convolution layout, so exported weights are a plain `Conv2d`.
 
+use rayon::prelude::*;
+
 /// Geometry of a SAME-padded 2D convolution's patches.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PatchGeometry {
@@ -61,35 +63,44 @@ impl PatchGeometry {
     pub fn extract(&self, images: &[f32], batch: usize, out: &mut Vec<f32>) {
         let (c, h, w) = (self.channels, self.rows, self.cols);
         assert_eq!(images.len(), batch * c * h * w, "patch input size");
+        out.clear();
+        out.resize(batch * self.positions() * self.patch_len(), 0.0);
+        let per_image = (self.positions() * self.patch_len()).max(1);
+        // One image per work item: a batch of 32 is 23 MB of patches, two cores' work.
+        out.par_chunks_mut(per_image)
+            .zip(images.par_chunks((c * h * w).max(1)))
+            .for_each(|(out, image)| self.extract_one(image, out));
+    }
+
+    /// The patches of one `[channels, rows, cols]` image into `out` (zeroed, one image's
+    /// worth).
+    fn extract_one(&self, image: &[f32], out: &mut [f32]) {
+        let (c, h, w) = (self.channels, self.rows, self.cols);
         let [or, oc] = self.out();
         let [kh, kw] = self.kernel;
         let [pt, pl] = self.pad_before();
-        out.clear();
-        out.resize(batch * self.positions() * self.patch_len(), 0.0);
         let (patch, kernel_plane) = (self.patch_len(), kh * kw);
         let mut o = 0;
-        for b in 0..batch {
-            for y in 0..or {
-                for x in 0..oc {
-                    // Kernel columns that land inside the image: one slice copy per row.
-                    let x0 = (x * self.stride) as isize - pl as isize;
-                    let kx_lo = (-x0).max(0) as usize;
-                    let kx_hi = ((w as isize - x0).max(0) as usize).min(kw);
-                    for ch in 0..c {
-                        let plane = &images[(b * c + ch) * h * w..(b * c + ch + 1) * h * w];
-                        for ky in 0..kh {
-                            let iy = (y * self.stride + ky) as isize - pt as isize;
-                            if !(0..h as isize).contains(&iy) || kx_lo >= kx_hi {
-                                continue;
-                            }
-                            let src = iy as usize * w + (x0 + kx_lo as isize) as usize;
-                            let dst = o + ch * kernel_plane + ky * kw + kx_lo;
-                            out[dst..dst + kx_hi - kx_lo]
-                                .copy_from_slice(&plane[src..src + kx_hi - kx_lo]);
+        for y in 0..or {
+            for x in 0..oc {
+                // Kernel columns that land inside the image: one slice copy per row.
+                let x0 = (x * self.stride) as isize - pl as isize;
+                let kx_lo = (-x0).max(0) as usize;
+                let kx_hi = ((w as isize - x0).max(0) as usize).min(kw);
+                for ch in 0..c {
+                    let plane = &image[ch * h * w..(ch + 1) * h * w];
+                    for ky in 0..kh {
+                        let iy = (y * self.stride + ky) as isize - pt as isize;
+                        if !(0..h as isize).contains(&iy) || kx_lo >= kx_hi {
+                            continue;
                         }
+                        let src = iy as usize * w + (x0 + kx_lo as isize) as usize;
+                        let dst = o + ch * kernel_plane + ky * kw + kx_lo;
+                        out[dst..dst + kx_hi - kx_lo]
+                            .copy_from_slice(&plane[src..src + kx_hi - kx_lo]);
                     }
-                    o += patch;
                 }
+                o += patch;
             }
         }
     }

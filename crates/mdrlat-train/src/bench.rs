@@ -130,7 +130,14 @@ pub fn profile(
     let (targets, _) = median_ms(min_time, || {
         learner.td_targets(&b);
     });
+    let patches = variant.uses_depth().then(|| {
+        median_ms(min_time, || {
+            crate::learner::tensor4(&b.depth, batch, device);
+        })
+        .0
+    });
     let mut phases: [Vec<f64>; 3] = Default::default();
+    let (fused_before, fallback_before) = learner.adam_paths();
     let (step, _) = median_ms(min_time, || {
         learner.update(&b);
         for (v, ms) in phases.iter_mut().zip(learner.phase_times()) {
@@ -138,15 +145,27 @@ pub fn profile(
         }
     });
     let [mut p0, mut p1, mut p2] = phases;
+    let (fused, fallback) = learner.adam_paths();
+    let (fused, fallback) = (fused - fused_before, fallback - fallback_before);
+    let share = 100.0 * fused as f64 / (fused + fallback).max(1) as f64;
     out.push(("= forward with autodiff, one pass".into(), forward));
     out.push(("= backward, stage by stage".into(), backward));
+    if let Some(ms) = patches {
+        out.push((
+            "one batch's depth input to the device (flex: patches cut on the host)".into(),
+            ms,
+        ));
+    }
     out.push(("target forwards (eq. 10, 2 passes; side by side on flex)".into(), targets));
     out.push((
         "step phase 1: targets + online forward (side by side on flex)".into(),
         median(&mut p0),
     ));
     out.push(("step phase 2: losses and backward".into(), median(&mut p1)));
-    out.push(("step phase 3: Adam (and a plain copy of the net)".into(), median(&mut p2)));
+    out.push((
+        format!("step phase 3: Adam ({share:.0}% of parameter updates fused) + plain copy"),
+        median(&mut p2),
+    ));
     out.push(("= gradient step".into(), step));
     out
 }

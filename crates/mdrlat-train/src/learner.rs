@@ -1,15 +1,17 @@
 //! The learning rule: double DQN with a dueling network and the auxiliary velocity task
 //! (paper eqs. 10, 12, 13; Algorithm 1 lines 6–17).
 
+use crate::adam::{AdamCounts, FusedAdam};
 use crate::config::TrainConfig;
 use crate::replay::Batch;
 use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY};
 use mdrlat_nn::burn::module::Module;
-use mdrlat_nn::burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use mdrlat_nn::burn::optim::{GradientsParams, ModuleOptimizer};
 use mdrlat_nn::burn::prelude::*;
 use mdrlat_nn::burn::store::{BurnpackStore, ModuleSnapshot};
 use mdrlat_nn::{QNet, QNetConfig, Variant};
 use std::path::Path;
+use std::sync::Arc;
 
 /// Losses of one gradient step.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -46,6 +48,8 @@ pub struct Learner {
     plain: QNet,
     target: QNet,
     optim: ModuleOptimizer,
+    /// How many parameter updates the fused Adam pass made, and how many went to burn's.
+    adam_counts: Arc<AdamCounts>,
     gamma: f32,
     learning_rate: f64,
     aux_weight: f32,
@@ -72,9 +76,10 @@ pub(crate) fn tensor3(data: &[f32], b: usize, device: &Device) -> Tensor<3> {
     Tensor::from_data(TensorData::new(data.to_vec(), [b, FRAME_STACK, LASER_BEAMS]), device)
 }
 
-/// Depth stacks `[B, 4, 128, 160]` as the network's patch input (see `mdrlat_nn::patches`).
+/// Depth stacks `[B, 4, 128, 160]` as the network's input on `device` (see
+/// `mdrlat_nn::depth_input`).
 pub(crate) fn tensor4(data: &[f32], b: usize, device: &Device) -> Tensor<4> {
-    mdrlat_nn::depth_patches(data, b, DEPTH_ROWS, DEPTH_COLS, device)
+    mdrlat_nn::depth_input(data, b, DEPTH_ROWS, DEPTH_COLS, device)
 }
 
 /// The index of the largest value (the first on ties; 0 for an empty row or all NaN).
@@ -117,7 +122,9 @@ impl Learner {
         let online = QNetConfig::new(config.variant).init_seeded(&train_device, config.seed);
         let target = online.valid();
         let plain = online.valid();
-        let optim = AdamConfig::new().with_epsilon(config.adam_epsilon).init();
+        let adam = FusedAdam::new(config.adam_epsilon);
+        let adam_counts = adam.counts();
+        let optim = adam.into_module_optimizer();
         Self {
             variant: config.variant,
             train_device,
@@ -126,6 +133,7 @@ impl Learner {
             plain,
             target,
             optim,
+            adam_counts,
             gamma: config.gamma,
             learning_rate: config.learning_rate,
             aux_weight: config.aux_loss_weight,
@@ -233,10 +241,36 @@ impl Learner {
         self.phase_ms
     }
 
+    /// Parameter updates of the Adam steps so far: `(fused, through burn's Adam)`. On the CPU
+    /// backends every step after the first is fused, except the one after each target sync
+    /// (the target then shares the online weights, which must not change under it).
+    pub fn adam_paths(&self) -> (u64, u64) {
+        (self.adam_counts.fused(), self.adam_counts.fallback())
+    }
+
     /// One gradient step on a sampled batch (Algorithm 1, lines 7–15).
     pub fn update(&mut self, batch: &Batch) -> Losses {
-        let b = batch.size;
         let t0 = std::time::Instant::now();
+        let (grads, losses, t1) = self.gradients(batch);
+        let t2 = std::time::Instant::now();
+        // Line 15: one Adam step on the online network. The network is moved into the
+        // optimiser and the stale autodiff-free copy dropped first, so that each parameter
+        // has a single owner and the fused pass may update it in place.
+        let online = std::mem::replace(&mut self.online, self.target.clone());
+        self.plain = self.target.clone();
+        self.online = self.optim.step(self.learning_rate, online, grads);
+        self.plain = self.online.valid();
+        let ms = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64() * 1e3;
+        self.phase_ms = [ms(t0, t1), ms(t1, t2), ms(t2, std::time::Instant::now())];
+        self.updates += 1;
+        losses
+    }
+
+    /// Lines 7–14: the targets, the losses and their gradients. Every tensor of the autodiff
+    /// graph is dropped on return, so the graph holds no parameter any more. The instant is
+    /// the end of the forward phase.
+    fn gradients(&self, batch: &Batch) -> (GradientsParams, Losses, std::time::Instant) {
+        let b = batch.size;
         let (y, out) = self.targets_and_forward(batch);
         let y = Tensor::<2>::from_data(y.into_data(), &self.train_device);
         let t1 = std::time::Instant::now();
@@ -264,15 +298,8 @@ impl Learner {
             }
             None => (td, 0.0),
         };
-        // Line 15: one Adam step on the online network.
         let grads = GradientsParams::from_grads(loss.backward(), &self.online);
-        let t2 = std::time::Instant::now();
-        self.online = self.optim.step(self.learning_rate, self.online.clone(), grads);
-        self.plain = self.online.valid();
-        let ms = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64() * 1e3;
-        self.phase_ms = [ms(t0, t1), ms(t1, t2), ms(t2, std::time::Instant::now())];
-        self.updates += 1;
-        Losses { td: td_value, at: at_value, q_mean }
+        (grads, Losses { td: td_value, at: at_value, q_mean }, t1)
     }
 
     /// Saves the online and target weights and the Adam moments into `dir` (burnpack files,

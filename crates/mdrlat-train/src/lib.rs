@@ -3,6 +3,7 @@
 //! The learning rule ([`learner`]), the replay buffer ([`replay`]) and the loop that ties
 //! them to the simulator ([`train`]) are separate rooms, as in Stable-Baselines3.
 
+pub mod adam;
 pub mod bench;
 pub mod checkpoint;
 pub mod config;

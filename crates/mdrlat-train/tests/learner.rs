@@ -112,3 +112,34 @@ fn profile_times_every_stage_forward_and_backward() {
         assert!(s.forward_ms > 0.0 && s.backward_ms.is_some_and(|b| b > 0.0), "{s:?}");
     }
 }
+
+#[test]
+fn adam_updates_in_place_yet_the_target_keeps_its_weights() {
+    let cfg =
+        TrainConfig { variant: Variant::LaserOnly, learning_rate: 1e-3, ..TrainConfig::default() };
+    let mut learner = Learner::new(&cfg, &Device::flex());
+    let mut rng = Rng::seed_from_u64(9);
+    let b = batch(8, &[0.0; 8], &mut rng, false);
+    let next = mdrlat_train::Inputs { size: 8, laser: b.next_laser.clone(), depth: vec![] };
+    for _ in 0..3 {
+        learner.update(&b);
+    }
+    learner.sync_target();
+    let target_before = learner.target_q_next(&b);
+    let online_before = learner.q_values(&next);
+    assert_eq!(target_before, online_before, "θ⁻ ← θ");
+    for _ in 0..3 {
+        learner.update(&b);
+    }
+    // The online network moved; the target network, which shared its weights at the sync,
+    // did not move with it.
+    assert_ne!(learner.q_values(&next), online_before);
+    assert_eq!(learner.target_q_next(&b), target_before);
+    // Every parameter update is fused except the first step's (which creates the moments)
+    // and the step right after the sync (whose weights the target then still shared).
+    let (fused, fallback) = learner.adam_paths();
+    let per_step = (fused + fallback) / 6;
+    assert_eq!((fused + fallback) % 6, 0);
+    assert!(per_step >= 10, "{per_step} parameters");
+    assert_eq!((fused, fallback), (4 * per_step, 2 * per_step));
+}
