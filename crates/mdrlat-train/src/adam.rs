@@ -288,12 +288,21 @@ mod tests {
     }
 
     /// `steps` steps of a least-squares fit of `net` with `optim` (inputs drawn from `seed`).
-    fn fit(mut net: Linear, optim: &mut ModuleOptimizer, steps: usize, seed: u64) -> Linear {
-        let device = Device::flex().autodiff();
+    fn fit(net: Linear, optim: &mut ModuleOptimizer, steps: usize, seed: u64) -> Linear {
+        fit_on(&Device::flex().autodiff(), net, optim, steps, seed)
+    }
+
+    fn fit_on(
+        device: &Device,
+        mut net: Linear,
+        optim: &mut ModuleOptimizer,
+        steps: usize,
+        seed: u64,
+    ) -> Linear {
         let mut rng = mdrlat_core::Rng::seed_from_u64(seed);
         for _ in 0..steps {
             let x: Vec<f32> = (0..8 * 300).map(|_| rng.normal()).collect();
-            let x = Tensor::<2>::from_data(TensorData::new(x, [8, 300]), &device);
+            let x = Tensor::<2>::from_data(TensorData::new(x, [8, 300]), device);
             let loss = net.forward(x).square().mean();
             let grads = GradientsParams::from_grads(loss.backward(), &net);
             drop(loss);
@@ -328,6 +337,21 @@ mod tests {
         let ours = fit(linear(&device), &mut fused.into_module_optimizer(), 6, 1);
         assert_eq!(differences(&weights(&ours), &weights(&reference)), (0, 0.0));
         // Step 1 creates the moments through burn; steps 2–6 are fused for weight and bias.
+        assert_eq!((counts.fused(), counts.fallback()), (10, 2));
+    }
+
+    /// On LibTorch's CPU tensors too (`cargo test --features tch`, with LibTorch set up).
+    #[cfg(feature = "tch")]
+    #[test]
+    #[allow(deprecated)] // burn-tch is deprecated upstream; it is our `tch` backend.
+    fn fused_steps_equal_burns_adam_on_libtorch() {
+        let device = Device::libtorch().autodiff();
+        let reference = fit_on(&device, linear(&device), &mut burn_adam(), 6, 1);
+        let fused = FusedAdam::new(1e-8);
+        let counts = fused.counts();
+        let ours = fit_on(&device, linear(&device), &mut fused.into_module_optimizer(), 6, 1);
+        let (_, worst) = differences(&weights(&ours), &weights(&reference));
+        assert!(worst < 1e-6, "max difference {worst}");
         assert_eq!((counts.fused(), counts.fallback()), (10, 2));
     }
 

@@ -115,9 +115,21 @@ fn profile_times_every_stage_forward_and_backward() {
 
 #[test]
 fn adam_updates_in_place_yet_the_target_keeps_its_weights() {
+    in_place_updates_spare_the_target(&Device::flex());
+}
+
+/// The same on LibTorch's CPU tensors (`cargo test --features tch`, with LibTorch set up).
+#[cfg(feature = "tch")]
+#[test]
+#[allow(deprecated)] // burn-tch is deprecated upstream; it is our `tch` backend.
+fn adam_updates_in_place_yet_the_target_keeps_its_weights_on_libtorch() {
+    in_place_updates_spare_the_target(&Device::libtorch());
+}
+
+fn in_place_updates_spare_the_target(device: &Device) {
     let cfg =
         TrainConfig { variant: Variant::LaserOnly, learning_rate: 1e-3, ..TrainConfig::default() };
-    let mut learner = Learner::new(&cfg, &Device::flex());
+    let mut learner = Learner::new(&cfg, device);
     let mut rng = Rng::seed_from_u64(9);
     let b = batch(8, &[0.0; 8], &mut rng, false);
     let next = mdrlat_train::Inputs { size: 8, laser: b.next_laser.clone(), depth: vec![] };
