@@ -30,6 +30,7 @@ pub enum DeviceKind {
 
 impl DeviceKind {
     /// The burn device.
+    #[allow(deprecated)] // burn-tch is deprecated upstream; it is our `tch` backend.
     pub fn device(self) -> Device {
         match self {
             DeviceKind::Cpu => Device::flex(),
