@@ -22,8 +22,8 @@ pub mod patches;
 mod variant;
 
 pub use net::{
-    QNet, QNetConfig, QOutput, StageTime, bilinear, depth_input, depth_patches, dueling,
-    prefers_depth_patches,
+    DepthInput, QNet, QNetConfig, QOutput, StageTime, bilinear, depth_input, depth_patches,
+    dueling, prefers_depth_patches,
 };
 pub use variant::{Variant, VariantParseError};
 

@@ -133,25 +133,40 @@ pub struct DepthStream {
     c3: Conv2d,
 }
 
+/// What the depth stream reads: a batch of depth stacks, or the first convolution's patches
+/// of them. Both give the same features (tested); which is faster depends on the backend
+/// (see [`depth_input`]).
+#[derive(Debug, Clone)]
+pub enum DepthInput {
+    /// `[B, frames, rows, cols]` normalised depth stacks, which the first layer convolves.
+    Stacks(Tensor<4>),
+    /// `[B, out_rows, out_cols, frames·10·14]` SAME-padded patches of the stacks (see
+    /// [`depth_patches`]), which the first layer multiplies by its weight.
+    Patches(Tensor<4>),
+}
+
 impl DepthStream {
     /// # Shapes
-    /// `x`: the depth stacks `[B, 4, 128, 160]`, or their first-layer patches
-    /// `[B, 16, 20, 560]` (see [`depth_input`]) → `[B, 2560]`.
-    fn forward(&self, x: Tensor<4>) -> Tensor<2> {
-        let weight = self.c1.weight.val(); // [16, 4, 10, 14]
-        let [filters, frames, kh, kw] = weight.dims();
-        let [b, d1, d2, d3] = x.dims();
-        let x = if d1 == frames && d3 != frames * kh * kw {
-            self.c1.forward(x) // [B, 16, 16, 20]
-        } else {
-            let k = d3;
-            let weight = weight.reshape([filters, k]).transpose(); // [560, 16]
-            let x = x.reshape([b * d1 * d2, k]).matmul(weight); // [B·16·20, 16]
-            let x = match &self.c1.bias {
-                Some(bias) => x + bias.val().unsqueeze_dim::<2>(0), // [1, 16]
-                None => x,
-            };
-            x.reshape([b, d1, d2, filters]).permute([0, 3, 1, 2]) // [B, 16, 16, 20]
+    /// `x`: `Stacks [B, 4, 128, 160]` or `Patches [B, 16, 20, 560]` → `[B, 2560]`.
+    ///
+    /// # Panics
+    /// If patches are not as long as the first layer's kernel.
+    fn forward(&self, x: DepthInput) -> Tensor<2> {
+        let x = match x {
+            DepthInput::Stacks(x) => self.c1.forward(x), // [B, 16, 16, 20]
+            DepthInput::Patches(x) => {
+                let weight = self.c1.weight.val(); // [16, 4, 10, 14]
+                let [filters, frames, kh, kw] = weight.dims();
+                let [b, oh, ow, k] = x.dims();
+                assert_eq!(k, frames * kh * kw, "depth patches of a {frames}x{kh}x{kw} kernel");
+                let weight = weight.reshape([filters, k]).transpose(); // [560, 16]
+                let x = x.reshape([b * oh * ow, k]).matmul(weight); // [B·16·20, 16]
+                let x = match &self.c1.bias {
+                    Some(bias) => x + bias.val().unsqueeze_dim::<2>(0), // [1, 16]
+                    None => x,
+                };
+                x.reshape([b, oh, ow, filters]).permute([0, 3, 1, 2]) // [B, 16, 16, 20]
+            }
         };
         let x = relu(self.c2.forward(relu(x))); // [B, 32, 8, 10]
         let x = relu(self.c3.forward(x)); // [B, 32, 8, 10]
@@ -167,21 +182,22 @@ pub fn prefers_depth_patches(device: &Device) -> bool {
 }
 
 /// The depth network input of a batch of normalised `[B, frames, rows, cols]` depth
-/// stacks on `device`: the stacks as a tensor, or on `flex` the first convolution's
-/// SAME-padded patches (see [`prefers_depth_patches`], [`depth_patches`]). The depth stream
-/// takes either, with the same result.
+/// stacks on `device`: on `flex` the first convolution's SAME-padded patches, elsewhere the
+/// stacks (see [`prefers_depth_patches`]).
 pub fn depth_input(
     stacks: &[f32],
     batch: usize,
     rows: usize,
     cols: usize,
     device: &Device,
-) -> Tensor<4> {
+) -> DepthInput {
     if prefers_depth_patches(device) {
-        return depth_patches(stacks, batch, rows, cols, device);
+        DepthInput::Patches(depth_patches(stacks, batch, rows, cols, device))
+    } else {
+        let frames = stacks.len() / (batch * rows * cols).max(1);
+        let shape = [batch, frames, rows, cols];
+        DepthInput::Stacks(Tensor::from_data(TensorData::new(stacks.to_vec(), shape), device))
     }
-    let frames = stacks.len() / (batch * rows * cols).max(1);
-    Tensor::from_data(TensorData::new(stacks.to_vec(), [batch, frames, rows, cols]), device)
 }
 
 /// The first convolution's SAME-padded patches of a batch of normalised
@@ -312,15 +328,16 @@ impl QNet {
     /// The representation `h = concat(depth features, fusion, laser features, goal)`.
     ///
     /// # Shapes
-    /// `laser: [B, 4, 512]`, `depth: [B, 4, 128, 160]` or its patches `[B, 16, 20, 560]`
-    /// (see [`depth_input`]; each when the variant reads it), `goal: [B, goal_dim]` → `[B, h]`.
+    /// `laser: [B, 4, 512]`, `depth`: stacks `[B, 4, 128, 160]` or their patches
+    /// `[B, 16, 20, 560]` (see [`DepthInput`]; each when the variant reads it),
+    /// `goal: [B, goal_dim]` → `[B, h]`.
     ///
     /// # Panics
     /// If an input the variant needs is missing.
     pub fn representation(
         &self,
         laser: Option<Tensor<3>>,
-        depth: Option<Tensor<4>>,
+        depth: Option<DepthInput>,
         goal: Option<Tensor<2>>,
     ) -> Tensor<2> {
         let d = self
@@ -343,7 +360,7 @@ impl QNet {
     pub fn stage_times(
         &self,
         laser: Option<Tensor<3>>,
-        depth: Option<Tensor<4>>,
+        depth: Option<DepthInput>,
         backward: bool,
     ) -> Vec<StageTime> {
         let mut times = Vec::new();
@@ -395,7 +412,7 @@ impl QNet {
     pub fn forward(
         &self,
         laser: Option<Tensor<3>>,
-        depth: Option<Tensor<4>>,
+        depth: Option<DepthInput>,
         goal: Option<Tensor<2>>,
     ) -> QOutput {
         let h = self.representation(laser, depth, goal);
@@ -445,15 +462,27 @@ mod tests {
         let laser: Vec<f32> = (0..2 * 4 * 512).map(|_| rng.uniform() as f32).collect();
         let laser = Tensor::<3>::from_data(TensorData::new(laser, [2, 4, 512]), &dev);
         let stacks = Tensor::<4>::from_data(TensorData::new(raw.clone(), [2, 4, 128, 160]), &dev);
+        let stacks = DepthInput::Stacks(stacks);
         assert!(prefers_depth_patches(&dev) && prefers_depth_patches(&dev.clone().autodiff()));
         let patches = depth_input(&raw, 2, 128, 160, &dev);
-        assert_eq!(patches.dims(), [2, 16, 20, 560]);
-        let q = |d: Tensor<4>| {
+        assert!(matches!(&patches, DepthInput::Patches(p) if p.dims() == [2, 16, 20, 560]));
+        let q = |d: DepthInput| {
             let out = net.forward(Some(laser.clone()), Some(d), None).q;
             out.into_data().try_to_vec::<f32>().expect("f32")
         };
         let (a, b) = (q(stacks), q(patches));
         let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
         assert!(worst < 1e-4, "max difference {worst}");
+    }
+
+    /// LibTorch gets the stacks themselves (`cargo test --features tch`).
+    #[cfg(feature = "tch")]
+    #[test]
+    #[allow(deprecated)] // burn-tch is deprecated upstream; it is our `tch` backend.
+    fn libtorch_gets_the_stacks() {
+        let dev = Device::libtorch();
+        assert!(!prefers_depth_patches(&dev) && !prefers_depth_patches(&dev.clone().autodiff()));
+        let input = depth_input(&vec![0.5; 4 * 128 * 160], 1, 128, 160, &dev);
+        assert!(matches!(&input, DepthInput::Stacks(s) if s.dims() == [1, 4, 128, 160]));
     }
 }

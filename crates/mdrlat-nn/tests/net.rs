@@ -2,7 +2,7 @@
 
 use mdrlat_nn::burn::module::Module;
 use mdrlat_nn::burn::prelude::*;
-use mdrlat_nn::{QNetConfig, Variant, bilinear, dueling};
+use mdrlat_nn::{DepthInput, QNetConfig, Variant, bilinear, dueling};
 
 fn device() -> Device {
     Device::flex()
@@ -36,7 +36,9 @@ fn every_intermediate_shape() {
         let cfg = QNetConfig::new(variant);
         let net = cfg.init(&dev);
         let laser = variant.uses_laser().then(|| Tensor::<3>::zeros([b, 4, 512], &dev));
-        let depth = variant.uses_depth().then(|| Tensor::<4>::zeros([b, 16, 20, 560], &dev));
+        let depth = variant
+            .uses_depth()
+            .then(|| DepthInput::Patches(Tensor::<4>::zeros([b, 16, 20, 560], &dev)));
         let h = net.representation(laser.clone(), depth.clone(), None);
         let expect_h = match variant {
             Variant::LaserOnly => 1024,
@@ -57,7 +59,7 @@ fn every_intermediate_shape() {
     let net = nav.init(&dev);
     let h = net.representation(
         Some(Tensor::zeros([1, 4, 512], &dev)),
-        Some(Tensor::zeros([1, 16, 20, 560], &dev)),
+        Some(DepthInput::Stacks(Tensor::zeros([1, 4, 128, 160], &dev))),
         Some(Tensor::zeros([1, 3], &dev)),
     );
     assert_eq!(h.dims(), [1, 4099]);

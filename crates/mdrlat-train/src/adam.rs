@@ -200,7 +200,10 @@ mod libtorch {
 
     pub(super) fn host_slice_mut(t: &mut TchTensor) -> Option<&mut [f32]> {
         // `can_mut`: this is the only burn tensor on its storage and no stride is zero — the
-        // same test burn-tch makes before its own in-place operations.
+        // same test burn-tch makes before its own in-place operations. It rests on burn-tch
+        // (pinned at 0.22.1) giving every view of a buffer (reshape, permute, slices) that
+        // buffer's shared owner count; a miscount there would make this write visible
+        // through another tensor.
         if !t.can_mut() || !host_f32(t) {
             return None;
         }
@@ -390,17 +393,24 @@ mod tests {
         let mut uninterrupted = burn_adam();
         let net = fit(start.clone(), &mut uninterrupted, 3, 3);
         let straight = weights(&fit(net, &mut uninterrupted, 2, 3));
-        // Three fused steps, saved, resumed by burn's Adam for two more; and the reverse.
-        let mut fused = FusedAdam::new(1e-8).into_module_optimizer();
+        // Three steps (two fused), saved, resumed by burn's Adam for two more; and the reverse.
+        let counting = FusedAdam::new(1e-8);
+        let counts = counting.counts();
+        let mut fused = counting.into_module_optimizer();
         let net = fit(start.clone(), &mut fused, 3, 3);
+        assert_eq!((counts.fused(), counts.fallback()), (4, 2));
         fused.save(&path).expect("save");
         let mut resumed = burn_adam().load(&path).expect("load");
         assert_eq!(differences(&weights(&fit(net, &mut resumed, 2, 3)), &straight), (0, 0.0));
         let mut plain = burn_adam();
         let net = fit(start.clone(), &mut plain, 3, 3);
         plain.save(&path).expect("save");
-        let mut resumed = FusedAdam::new(1e-8).into_module_optimizer().load(&path).expect("load");
+        let counting = FusedAdam::new(1e-8);
+        let counts = counting.counts();
+        let mut resumed = counting.into_module_optimizer().load(&path).expect("load");
         assert_eq!(differences(&weights(&fit(net, &mut resumed, 2, 3)), &straight), (0, 0.0));
+        // The loaded moments were used in place from the first step on.
+        assert_eq!((counts.fused(), counts.fallback()), (4, 0));
         std::fs::remove_dir_all(&dir).ok();
     }
 }

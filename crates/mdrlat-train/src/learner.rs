@@ -78,7 +78,7 @@ pub(crate) fn tensor3(data: &[f32], b: usize, device: &Device) -> Tensor<3> {
 
 /// Depth stacks `[B, 4, 128, 160]` as the network's input on `device` (see
 /// `mdrlat_nn::depth_input`).
-pub(crate) fn tensor4(data: &[f32], b: usize, device: &Device) -> Tensor<4> {
+pub(crate) fn tensor4(data: &[f32], b: usize, device: &Device) -> mdrlat_nn::DepthInput {
     mdrlat_nn::depth_input(data, b, DEPTH_ROWS, DEPTH_COLS, device)
 }
 
@@ -158,7 +158,7 @@ impl Learner {
         laser: &[f32],
         depth: &[f32],
         b: usize,
-    ) -> (Option<Tensor<3>>, Option<Tensor<4>>) {
+    ) -> (Option<Tensor<3>>, Option<mdrlat_nn::DepthInput>) {
         let dev = if AD { &self.train_device } else { &self.device };
         (
             self.variant.uses_laser().then(|| tensor3(laser, b, dev)),
@@ -255,7 +255,8 @@ impl Learner {
         let t2 = std::time::Instant::now();
         // Line 15: one Adam step on the online network. The network is moved into the
         // optimiser and the stale autodiff-free copy dropped first, so that each parameter
-        // has a single owner and the fused pass may update it in place.
+        // has a single owner and the fused pass may update it in place. (The placeholder is
+        // never used: a panic in the step is a bug that ends the run.)
         let online = std::mem::replace(&mut self.online, self.target.clone());
         self.plain = self.target.clone();
         self.online = self.optim.step(self.learning_rate, online, grads);
