@@ -3,7 +3,7 @@
 
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner};
-use crate::replay::{Batch, ReplayBuffer};
+use crate::replay::{Batch, ReplayBuffer, Transition};
 use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Rng};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
@@ -89,6 +89,40 @@ pub fn replay_bytes(variant: Variant, capacity: usize) -> usize {
     ReplayBuffer::new(capacity, reserve, variant.uses_laser(), variant.uses_depth()).memory_bytes()
 }
 
+/// Median milliseconds of sampling a batch of `batch` transitions from a replay buffer of
+/// 2,000 (random frames, one long episode): the frame lookups, u16 → f32 and normalisation
+/// that every gradient step starts with.
+pub fn sample_ms(variant: Variant, batch: usize, min_time: Duration) -> f64 {
+    let (n, mut rng) = (2_000, Rng::seed_from_u64(4));
+    let mut replay = ReplayBuffer::new(n, n, variant.uses_laser(), variant.uses_depth());
+    let frame = |replay: &mut ReplayBuffer, rng: &mut Rng| {
+        let laser: Vec<f32> = (0..LASER_BEAMS).map(|_| rng.range_f32(0.1, 5.6)).collect();
+        let depth: Vec<f32> = (0..DEPTH_LEN).map(|_| rng.range_f32(0.4, 10.0)).collect();
+        replay.push_frame(&laser, &depth)
+    };
+    let mut ids = [frame(&mut replay, &mut rng); FRAME_STACK];
+    for _ in 0..n {
+        let obs = ids;
+        ids.rotate_left(1);
+        ids[FRAME_STACK - 1] = frame(&mut replay, &mut rng);
+        let t = Transition {
+            obs,
+            next: ids,
+            action: 0,
+            reward: 0.0,
+            terminated: false,
+            odom: [0.0; 2 * mdrlat_core::ODOM_HISTORY],
+        };
+        replay.push(t);
+    }
+    let mut out = Batch::default();
+    median_ms(min_time, || {
+        let indices = replay.sample_indices(batch, &mut rng);
+        replay.write_batch(&indices, &mut out);
+    })
+    .0
+}
+
 /// Where one gradient step's time goes, milliseconds: forward and backward of each network
 /// stage (batch `batch`, with autodiff, each stage's inputs detached), the two
 /// target-network forwards of eq. (10), the rest of the step (losses, graph, Adam) and the
@@ -130,6 +164,7 @@ pub fn profile(
     let (targets, _) = median_ms(min_time, || {
         learner.td_targets(&b);
     });
+    let sample = sample_ms(variant, batch, min_time);
     let patches = variant.uses_depth().then(|| {
         median_ms(min_time, || {
             crate::learner::tensor4(&b.depth, batch, device);
@@ -150,6 +185,7 @@ pub fn profile(
     let share = 100.0 * fused as f64 / (fused + fallback).max(1) as f64;
     out.push(("= forward with autodiff, one pass".into(), forward));
     out.push(("= backward, stage by stage".into(), backward));
+    out.push(("sampling a batch from the replay buffer (frames to f32 stacks)".into(), sample));
     if let Some(ms) = patches {
         out.push((
             "one batch's depth input to the device (flex: patches cut on the host)".into(),
