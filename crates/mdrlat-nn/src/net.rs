@@ -174,11 +174,18 @@ impl DepthStream {
     }
 }
 
+/// Whether `device` (with or without autodiff) is burn's pure-Rust `flex` CPU backend, whose
+/// kernels are single-threaded: the learner runs independent work side by side there, and
+/// the depth stream is fed patches (see [`prefers_depth_patches`]).
+pub fn is_flex(device: &Device) -> bool {
+    device.clone().inner() == Device::flex()
+}
+
 /// Whether the depth stream's first layer should be fed patches cut on the host (burn's
 /// `flex` CPU backend, whose direct convolution is slow) rather than the stacks themselves
 /// (LibTorch and the GPUs convolve well, and patches are 2.2× the bytes to move).
 pub fn prefers_depth_patches(device: &Device) -> bool {
-    device.clone().inner() == Device::flex()
+    is_flex(device)
 }
 
 /// The depth network input of a batch of normalised `[B, frames, rows, cols]` depth

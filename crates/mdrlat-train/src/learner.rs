@@ -117,7 +117,7 @@ impl Learner {
     /// copy (Algorithm 1, line 1).
     pub fn new(config: &TrainConfig, device: &Device) -> Self {
         let device = device.clone();
-        let side_by_side = device == Device::flex();
+        let side_by_side = mdrlat_nn::is_flex(&device);
         let train_device = device.clone().autodiff();
         let online = QNetConfig::new(config.variant).init_seeded(&train_device, config.seed);
         let target = online.valid();
