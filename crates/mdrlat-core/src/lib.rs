@@ -8,14 +8,16 @@
 pub mod action;
 pub mod npy;
 pub mod obs;
+pub mod policy;
 pub mod rng;
 
 pub use action::{Action, TABLE_1, Velocity};
 pub use obs::{
     DEPTH_COLS, DEPTH_HFOV_DEG, DEPTH_LEN, DEPTH_MIN_RANGE_M, DEPTH_ROWS, DEPTH_VFOV_DEG,
     FRAME_STACK, FrameStack, LASER_BEAMS, LASER_FOV_DEG, LASER_MAX_RANGE_M, ODOM_HISTORY,
-    laser_beam_angle, normalize_depth, normalize_laser,
+    Observation, laser_beam_angle, normalize_depth, normalize_laser,
 };
+pub use policy::{Policy, PolicyError, Sensors, greedy_actions};
 pub use rng::Rng;
 
 /// Robot constants shared by the simulator and the world checks (turtlebot2 / Kobuki).

@@ -5,6 +5,8 @@
 //! and the ROS node call [`normalize_laser`] and [`normalize_depth`], so sim-to-real never
 //! depends on two copies agreeing.
 
+use crate::action::Velocity;
+
 /// Number of laser beams per scan.
 pub const LASER_BEAMS: usize = 512;
 /// Depth image rows.
@@ -129,6 +131,34 @@ impl FrameStack {
         assert_eq!(out.len(), n * FRAME_STACK, "write_stacked: output length");
         for (k, chunk) in out.chunks_exact_mut(n).enumerate() {
             f(self.frame(k), chunk);
+        }
+    }
+}
+
+/// What the agent sees: the last 4 frames of each sensor (metres, oldest first) and the
+/// true velocities of the last 3 steps for the auxiliary task.
+///
+/// Frames are raw metres; the network input is made with [`normalize_laser`] /
+/// [`normalize_depth`] ([`FrameStack::write_stacked`]), the one normalisation shared by
+/// the simulator and the real robot. Both build this type, so a [`Policy`](crate::Policy)
+/// cannot tell them apart.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// Laser ranges, 4 x 512, metres.
+    pub laser: FrameStack,
+    /// Depth images, 4 x 128 x 160, metres (0: no reading).
+    pub depth: FrameStack,
+    /// True `(v, ω)` at `t−2`, `t−1`, `t`.
+    pub odom: [Velocity; ODOM_HISTORY],
+}
+
+impl Observation {
+    /// An all-zero observation.
+    pub fn zeros() -> Self {
+        Self {
+            laser: FrameStack::new(LASER_BEAMS),
+            depth: FrameStack::new(DEPTH_LEN),
+            odom: [Velocity::default(); ODOM_HISTORY],
         }
     }
 }

@@ -7,26 +7,12 @@
 
 use crate::convert::{ScanError, ScanOptions, convert_depth, resample_scan};
 use crate::msg::{Image, LaserScan, Odometry, WireError};
-use mdrlat_core::{
-    Action, DEPTH_LEN, FRAME_STACK, FrameStack, LASER_BEAMS, Velocity, normalize_depth,
-    normalize_laser,
-};
+use mdrlat_core::{Action, DEPTH_LEN, LASER_BEAMS, ODOM_HISTORY, Observation, Velocity};
 use std::time::{Duration, Instant};
 
-/// A policy the node runs: normalised stacked observations in, an action out.
-pub trait Policy: Send {
-    /// Whether the policy reads the laser.
-    fn uses_laser(&self) -> bool;
-    /// Whether the policy reads the depth camera.
-    fn uses_depth(&self) -> bool;
-    /// The action for `laser` (`[4, 512]`, normalised by `mdrlat_core::normalize_laser`,
-    /// oldest frame first; empty when unused) and `depth` (`[4, 128, 160]`, normalised by
-    /// `mdrlat_core::normalize_depth`; empty when unused).
-    ///
-    /// # Errors
-    /// Inference failed; the node sends zero velocity.
-    fn decide(&mut self, laser: &[f32], depth: &[f32]) -> Result<Action, String>;
-}
+/// The policy the node runs: the one interface of `mdrlat-core`, fed the same
+/// [`Observation`] (4-frame stacks in metres, odometry) as in the simulator.
+pub use mdrlat_core::Policy;
 
 /// The node's limits and sensor rules.
 #[derive(Debug, Clone, PartialEq)]
@@ -119,14 +105,13 @@ pub struct Controller {
     depth: Slot,
     odom: Slot,
     odom_velocity: Velocity,
-    laser_stack: FrameStack,
-    depth_stack: FrameStack,
+    /// The 4-frame stacks (metres) and odometry the policy reads.
+    obs: Observation,
     /// Frames pushed since the stacks were last (re)started.
     stacked: usize,
     stops: Vec<Stop>,
     inference_error: Option<String>,
-    laser_input: Vec<f32>,
-    depth_input: Vec<f32>,
+    actions: Vec<Action>,
     scratch_scan: [f32; LASER_BEAMS],
     /// A scan has been read successfully.
     scans_ok: bool,
@@ -150,13 +135,11 @@ impl Controller {
             depth: Slot::new(DEPTH_LEN),
             odom: Slot::new(0),
             odom_velocity: Velocity::default(),
-            laser_stack: FrameStack::new(LASER_BEAMS),
-            depth_stack: FrameStack::new(DEPTH_LEN),
+            obs: Observation::zeros(),
             stacked: 0,
             stops: Vec::new(),
             inference_error: None,
-            laser_input: Vec::new(),
-            depth_input: Vec::new(),
+            actions: Vec::with_capacity(1),
             scratch_scan: [0.0; LASER_BEAMS],
             scans_ok: false,
             fatal: None,
@@ -335,31 +318,26 @@ impl Controller {
         if stops.is_empty() {
             // Algorithm 1's stacking at the control rate: one frame per tick.
             if self.uses_laser {
-                self.laser_stack.push_slot().copy_from_slice(&self.laser.frame);
+                self.obs.laser.push_slot().copy_from_slice(&self.laser.frame);
             }
             if self.uses_depth {
-                self.depth_stack.push_slot().copy_from_slice(&self.depth.frame);
+                self.obs.depth.push_slot().copy_from_slice(&self.depth.frame);
             }
             if self.stacked == 0 {
                 // As after a reset in the simulator: the first frame fills the stack.
-                self.laser_stack.fill_with_latest();
-                self.depth_stack.fill_with_latest();
+                self.obs.laser.fill_with_latest();
+                self.obs.depth.fill_with_latest();
+                self.obs.odom = [Velocity::default(); ODOM_HISTORY];
             }
+            self.obs.odom.rotate_left(1);
+            self.obs.odom[ODOM_HISTORY - 1] = self.odom_velocity;
             self.stacked += 1;
-            self.laser_input
-                .resize(if self.uses_laser { FRAME_STACK * LASER_BEAMS } else { 0 }, 0.0);
-            self.depth_input.resize(if self.uses_depth { FRAME_STACK * DEPTH_LEN } else { 0 }, 0.0);
-            if self.uses_laser {
-                self.laser_stack.write_stacked(&mut self.laser_input, normalize_laser);
-            }
-            if self.uses_depth {
-                self.depth_stack.write_stacked(&mut self.depth_input, normalize_depth);
-            }
             let started = Instant::now();
-            let (laser, depth) = (&self.laser_input, &self.depth_input);
+            let (obs, actions) = (&self.obs, &mut self.actions);
             // A panicking backend is an inference error, not a dead node.
             let decided = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                policy.decide(laser, depth)
+                policy.act(&[obs], &[0], actions).map_err(|e| e.to_string())?;
+                actions.first().copied().ok_or_else(|| "the policy returned no action".to_string())
             }))
             .unwrap_or_else(|panic| {
                 let what = panic
@@ -432,29 +410,33 @@ mod tests {
     }
 
     impl Policy for Fixed {
-        fn uses_laser(&self) -> bool {
-            true
+        fn name(&self) -> String {
+            "fixed".into()
         }
-        fn uses_depth(&self) -> bool {
-            true
+        fn sensors(&self) -> mdrlat_core::Sensors {
+            mdrlat_core::Sensors::BOTH
         }
-        fn decide(&mut self, laser: &[f32], depth: &[f32]) -> Result<Action, String> {
-            self.seen.push((laser.to_vec(), depth.to_vec()));
+        fn act(
+            &mut self,
+            batch: &[&Observation],
+            _slots: &[usize],
+            out: &mut Vec<Action>,
+        ) -> Result<(), mdrlat_core::PolicyError> {
+            // What a network gets: the stacks through the one normalisation.
+            let obs = batch[0];
+            let mut laser = vec![0.0; 4 * LASER_BEAMS];
+            let mut depth = vec![0.0; 4 * DEPTH_LEN];
+            obs.laser.write_stacked(&mut laser, mdrlat_core::normalize_laser);
+            obs.depth.write_stacked(&mut depth, mdrlat_core::normalize_depth);
+            self.seen.push((laser, depth));
             assert!(self.action < 10, "out of actions");
+            out.clear();
             if self.fail {
-                Err("backend lost".into())
+                Err(mdrlat_core::PolicyError::Backend("backend lost".into()))
             } else {
-                Action::new(self.action).ok_or_default()
+                out.push(Action::new(self.action).expect("an action of Table 1"));
+                Ok(())
             }
-        }
-    }
-
-    trait OkOrDefault {
-        fn ok_or_default(self) -> Result<Action, String>;
-    }
-    impl OkOrDefault for Option<Action> {
-        fn ok_or_default(self) -> Result<Action, String> {
-            self.ok_or_else(|| "bad action".to_string())
         }
     }
 

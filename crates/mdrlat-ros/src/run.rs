@@ -96,7 +96,8 @@ pub fn run(
     stop: &AtomicBool,
     log: &(dyn Fn(&str) + Sync),
 ) -> Result<RunSummary, RosError> {
-    let (uses_laser, uses_depth) = (policy.uses_laser(), policy.uses_depth());
+    let sensors = policy.sensors();
+    let (uses_laser, uses_depth) = (sensors.laser, sensors.depth);
     if config.trigger == Trigger::Scan && !uses_laser {
         return Err(RosError::Config(
             "the scan trigger needs a policy that reads the laser (this one does not): use the timer"

@@ -26,6 +26,10 @@ pub struct SimConfig {
     /// Extra clearance, metres, between the robot footprint and any obstacle or pedestrian
     /// at a reset pose.
     pub spawn_clearance_m: f32,
+    /// Seconds ahead over which a reset pose must keep that clearance from every
+    /// pedestrian's path as well: pedestrians do not avoid the robot, so a start next to
+    /// one walking at it would be lost before the policy could act.
+    pub spawn_pedestrian_horizon_s: f32,
 }
 
 impl Default for SimConfig {
@@ -39,6 +43,7 @@ impl Default for SimConfig {
             depth: DepthConfig::default(),
             reward: RewardConfig::default(),
             spawn_clearance_m: mdrlat_core::robot::SPAWN_CLEARANCE_M,
+            spawn_pedestrian_horizon_s: 1.0,
         }
     }
 }
@@ -193,17 +198,24 @@ impl SimConfig {
                 return Err(ConfigError { field, problem: format!("must be positive, got {v}") });
             }
         }
-        let non_negative: [(&'static str, f32); 5] = [
+        let non_negative: [(&'static str, f32); 6] = [
             ("laser.noise_std_m", self.laser.noise_std_m),
             ("depth.min_range_m", self.depth.min_range_m),
             ("depth.noise_std_at_1m", self.depth.noise_std_at_1m),
             ("spawn_clearance_m", self.spawn_clearance_m),
+            ("spawn_pedestrian_horizon_s", self.spawn_pedestrian_horizon_s),
             ("reward.collision_range_m", self.reward.collision_range_m),
         ];
         for (field, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(ConfigError { field, problem: format!("must be >= 0, got {v}") });
             }
+        }
+        if self.spawn_pedestrian_horizon_s > 60.0 {
+            return Err(ConfigError {
+                field: "spawn_pedestrian_horizon_s",
+                problem: format!("must be <= 60 s, got {}", self.spawn_pedestrian_horizon_s),
+            });
         }
         if self.substeps == 0 {
             return Err(ConfigError { field: "substeps", problem: "must be at least 1".into() });

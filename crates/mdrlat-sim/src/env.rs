@@ -17,32 +17,7 @@ use std::sync::Arc;
 /// Attempts at drawing a collision-free reset pose before giving up.
 const SPAWN_ATTEMPTS: usize = 10_000;
 
-/// What the agent sees: the last 4 frames of each sensor (metres, oldest first) and the
-/// true velocities of the last 3 steps for the auxiliary task.
-///
-/// Frames are raw metres; the network input is made with `mdrlat_core::normalize_laser` /
-/// `normalize_depth` (`FrameStack::write_stacked`), the one normalisation shared with the
-/// real robot.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Observation {
-    /// Laser ranges, 4 x 512, metres.
-    pub laser: FrameStack,
-    /// Depth images, 4 x 128 x 160, metres (0: no reading).
-    pub depth: FrameStack,
-    /// True `(v, ω)` at `t−2`, `t−1`, `t`.
-    pub odom: [Velocity; ODOM_HISTORY],
-}
-
-impl Observation {
-    /// An all-zero observation.
-    pub fn zeros() -> Self {
-        Self {
-            laser: FrameStack::new(LASER_BEAMS),
-            depth: FrameStack::new(DEPTH_LEN),
-            odom: [Velocity::default(); ODOM_HISTORY],
-        }
-    }
-}
+pub use mdrlat_core::Observation;
 
 /// Why an episode ended in a collision.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -295,7 +270,26 @@ impl Env {
         Ok(&self.obs)
     }
 
+    /// Where each pedestrian will be at every physics sub-step of the next
+    /// `spawn_pedestrian_horizon_s` seconds (now included): `(centre, radius)`. Pedestrians
+    /// do not react to the robot, so their paths are known before a pose is drawn.
+    fn pedestrian_sweep(&self) -> Vec<(Vec2, f32)> {
+        let specs = &self.scene.world.pedestrians;
+        let sub_dt = self.config.dt_s / self.config.substeps as f32;
+        let n = (self.config.spawn_pedestrian_horizon_s / sub_dt).ceil() as usize;
+        let mut states = self.pedestrians.clone();
+        let mut sweep = Vec::with_capacity((n + 1) * states.len());
+        for k in 0..=n {
+            if k > 0 {
+                pedestrians::advance(specs, &mut states, sub_dt);
+            }
+            sweep.extend(states.iter().zip(specs).map(|(st, spec)| (st.position, spec.radius)));
+        }
+        sweep
+    }
+
     fn sample_pose(&mut self) -> Result<Pose2, SimError> {
+        let sweep = self.pedestrian_sweep();
         let world = &self.scene.world;
         let total: f32 = world.spawn.iter().map(|r| r.area()).sum();
         let clearance = self.config.robot.radius_m + self.config.spawn_clearance_m;
@@ -319,11 +313,8 @@ impl Env {
             let yaw = self.rng.range_f32(-std::f32::consts::PI, std::f32::consts::PI);
             let blocked_static =
                 self.scene.body_contact(p, clearance, &mut self.scratch, &mut self.buf).is_some();
-            let blocked_ped = self
-                .pedestrians
-                .iter()
-                .zip(&world.pedestrians)
-                .any(|(st, spec)| (st.position - p).length() < clearance + spec.radius);
+            let blocked_ped =
+                sweep.iter().any(|&(centre, radius)| (centre - p).length() < clearance + radius);
             if !blocked_static && !blocked_ped {
                 return Ok(Pose2::new(p.x, p.y, yaw));
             }

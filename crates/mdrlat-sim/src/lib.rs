@@ -10,6 +10,7 @@
 pub mod bench;
 pub mod config;
 pub mod env;
+pub mod episodes;
 pub mod pedestrians;
 pub mod policy;
 pub mod reward;
@@ -21,6 +22,10 @@ pub mod vec_env;
 
 pub use config::SimConfig;
 pub use env::{Collision, Env, EnvState, Observation, SimError, Step, StepInfo};
-pub use policy::{ConstantPolicy, Policy, RandomPolicy, WanderPolicy};
+pub use episodes::{
+    EpisodeOutcome, EpisodeSpec, Observer, Quiet, RunError, RunOptions, run_episodes,
+};
+pub use mdrlat_core::{Policy, PolicyError, Sensors};
+pub use policy::{ConstantPolicy, RandomPolicy, ReplayPolicy, Scripted, WanderPolicy};
 pub use scene::StaticScene;
-pub use vec_env::{VecEnv, VecStep};
+pub use vec_env::{EnvRef, VecEnv, VecStep};

@@ -1,33 +1,140 @@
-//! Scripted policies: baselines and demo drivers that need no network.
+//! Scripted policies: baselines and demo drivers that need no network. They implement the
+//! one [`Policy`] interface of `mdrlat-core`, like a trained network does.
 
+use crate::config::SimConfig;
 use crate::env::Observation;
-use crate::sensors::DepthGeometry;
-use mdrlat_core::{Action, Rng, TABLE_1};
+use crate::sensors::{DepthCamera, DepthGeometry, Laser};
+use mdrlat_core::{Action, Policy, PolicyError, Rng, Sensors, TABLE_1};
 
-/// Anything that picks an action from an observation.
-pub trait Policy {
-    /// The action for `obs`.
-    fn act(&mut self, obs: &Observation) -> Action;
+/// The scripted policies by name (`mdrlat rollout --policy`, `mdrlat eval --policy`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scripted {
+    /// Uniformly random actions (seeded per episode).
+    Random,
+    /// Always straight ahead at 0.5 m/s (action 1).
+    Forward,
+    /// The reactive wanderer on the laser and the depth camera: heads for the most open way.
+    Wander,
+    /// The same wanderer with the laser only: blind to low boxes and overhangs.
+    WanderLaser,
 }
 
-/// Uniformly random actions from its own seeded stream.
+impl Scripted {
+    /// Every scripted policy, in the order of [`Scripted::name`]s listed in errors.
+    pub const ALL: [Scripted; 4] =
+        [Scripted::Random, Scripted::Forward, Scripted::Wander, Scripted::WanderLaser];
+
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Scripted::Random => "random",
+            Scripted::Forward => "forward",
+            Scripted::Wander => "wander",
+            Scripted::WanderLaser => "wander-laser",
+        }
+    }
+
+    /// The policy for environments with `config`'s sensors; `seed` seeds the random
+    /// policy's stream until an episode gives it its own seed.
+    pub fn build(self, config: &SimConfig, seed: u64) -> Box<dyn Policy> {
+        let laser = Laser::new(&config.laser);
+        match self {
+            Scripted::Random => Box::new(RandomPolicy::new(seed)),
+            Scripted::Forward => {
+                Box::new(ConstantPolicy(Action::new(1).unwrap_or_else(|| unreachable!())))
+            }
+            Scripted::Wander => Box::new(WanderPolicy::with_depth(
+                laser.angles(),
+                DepthCamera::new(&config.depth).geometry(),
+                config.robot.body_height_m,
+            )),
+            Scripted::WanderLaser => Box::new(WanderPolicy::new(laser.angles())),
+        }
+    }
+}
+
+impl std::str::FromStr for Scripted {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Scripted::ALL.into_iter().find(|p| p.name() == s).ok_or_else(|| {
+            let names: Vec<&str> = Scripted::ALL.iter().map(|p| p.name()).collect();
+            format!("unknown policy '{s}' (scripted policies: {})", names.join(", "))
+        })
+    }
+}
+
+/// Uniformly random actions. Each slot draws from its own stream, restarted from the
+/// episode's seed at [`Policy::begin_episode`], so an episode's actions are a function of
+/// that episode alone.
 #[derive(Debug, Clone)]
 pub struct RandomPolicy {
-    rng: Rng,
+    seed: u64,
+    streams: Vec<Rng>,
+}
+
+/// The random policy's stream of an episode seeded `seed`.
+fn random_stream(seed: u64) -> Rng {
+    Rng::derive(seed, 0x5EED)
 }
 
 impl RandomPolicy {
-    /// A random policy seeded with `seed`.
+    /// A random policy; slots that start without an episode seed draw from streams of `seed`.
     pub fn new(seed: u64) -> Self {
-        Self { rng: Rng::derive(seed, 0x5EED) }
+        Self { seed, streams: Vec::new() }
+    }
+
+    fn stream(&mut self, slot: usize) -> &mut Rng {
+        while self.streams.len() <= slot {
+            let k = self.streams.len() as u64;
+            self.streams.push(if k == 0 {
+                random_stream(self.seed)
+            } else {
+                Rng::derive(self.seed, 0x5EED + k)
+            });
+        }
+        &mut self.streams[slot]
     }
 }
 
 impl Policy for RandomPolicy {
-    fn act(&mut self, _obs: &Observation) -> Action {
-        Action::new(self.rng.below(Action::COUNT))
-            .unwrap_or(Action::new(0).unwrap_or_else(|| unreachable!()))
+    fn name(&self) -> String {
+        "random".into()
     }
+    fn sensors(&self) -> Sensors {
+        Sensors::NONE
+    }
+    fn begin_episode(&mut self, slot: usize, seed: Option<u64>) {
+        let stream = self.stream(slot);
+        if let Some(seed) = seed {
+            *stream = random_stream(seed);
+        }
+    }
+    fn act(
+        &mut self,
+        batch: &[&Observation],
+        slots: &[usize],
+        out: &mut Vec<Action>,
+    ) -> Result<(), PolicyError> {
+        check_slots(batch, slots)?;
+        out.clear();
+        for &slot in slots {
+            let a = self.stream(slot).below(Action::COUNT);
+            out.push(Action::new(a).unwrap_or_else(|| unreachable!("below(COUNT)")));
+        }
+        Ok(())
+    }
+}
+
+/// Every observation needs its slot.
+fn check_slots(batch: &[&Observation], slots: &[usize]) -> Result<(), PolicyError> {
+    if batch.len() != slots.len() {
+        return Err(PolicyError::Backend(format!(
+            "{} observations but {} slots",
+            batch.len(),
+            slots.len()
+        )));
+    }
+    Ok(())
 }
 
 /// Always the same action.
@@ -35,8 +142,71 @@ impl Policy for RandomPolicy {
 pub struct ConstantPolicy(pub Action);
 
 impl Policy for ConstantPolicy {
-    fn act(&mut self, _obs: &Observation) -> Action {
-        self.0
+    fn name(&self) -> String {
+        format!("constant action {}", self.0)
+    }
+    fn sensors(&self) -> Sensors {
+        Sensors::NONE
+    }
+    fn act(
+        &mut self,
+        batch: &[&Observation],
+        slots: &[usize],
+        out: &mut Vec<Action>,
+    ) -> Result<(), PolicyError> {
+        check_slots(batch, slots)?;
+        out.clear();
+        out.resize(batch.len(), self.0);
+        Ok(())
+    }
+}
+
+/// Replays recorded actions, one list per slot: with the same episode seed an environment
+/// is a function of its actions, so this reproduces an episode exactly (for pictures of an
+/// episode run in a batch). Past the end of its list a slot repeats its last action.
+#[derive(Debug, Clone, Default)]
+pub struct ReplayPolicy {
+    actions: Vec<Vec<Action>>,
+    at: Vec<usize>,
+}
+
+impl ReplayPolicy {
+    /// Slot `i` plays `actions[i]`.
+    pub fn new(actions: Vec<Vec<Action>>) -> Self {
+        let at = vec![0; actions.len()];
+        Self { actions, at }
+    }
+}
+
+impl Policy for ReplayPolicy {
+    fn name(&self) -> String {
+        "replay".into()
+    }
+    fn sensors(&self) -> Sensors {
+        Sensors::NONE
+    }
+    fn begin_episode(&mut self, slot: usize, _seed: Option<u64>) {
+        if let Some(at) = self.at.get_mut(slot) {
+            *at = 0;
+        }
+    }
+    fn act(
+        &mut self,
+        batch: &[&Observation],
+        slots: &[usize],
+        out: &mut Vec<Action>,
+    ) -> Result<(), PolicyError> {
+        check_slots(batch, slots)?;
+        out.clear();
+        for &slot in slots {
+            let list = self.actions.get(slot).filter(|l| !l.is_empty()).ok_or_else(|| {
+                PolicyError::Backend(format!("no recorded actions for slot {slot}"))
+            })?;
+            let at = &mut self.at[slot];
+            out.push(list[(*at).min(list.len() - 1)]);
+            *at += 1;
+        }
+        Ok(())
     }
 }
 
@@ -78,8 +248,9 @@ impl WanderPolicy {
     }
 }
 
-impl Policy for WanderPolicy {
-    fn act(&mut self, obs: &Observation) -> Action {
+impl WanderPolicy {
+    /// The wanderer's action for one observation.
+    fn decide(&mut self, obs: &Observation) -> Action {
         self.ranges.clear();
         self.ranges.extend_from_slice(obs.laser.latest());
         if let Some((geometry, body)) = &self.depth {
@@ -104,5 +275,28 @@ impl Policy for WanderPolicy {
             }
         }
         Action::new(best.1).unwrap_or_else(|| unreachable!("index from Action::all"))
+    }
+}
+
+impl Policy for WanderPolicy {
+    fn name(&self) -> String {
+        if self.depth.is_some() { "wander".into() } else { "wander-laser".into() }
+    }
+    fn sensors(&self) -> Sensors {
+        Sensors { laser: true, depth: self.depth.is_some() }
+    }
+    fn act(
+        &mut self,
+        batch: &[&Observation],
+        slots: &[usize],
+        out: &mut Vec<Action>,
+    ) -> Result<(), PolicyError> {
+        check_slots(batch, slots)?;
+        out.clear();
+        for obs in batch {
+            let a = self.decide(obs);
+            out.push(a);
+        }
+        Ok(())
     }
 }

@@ -1,10 +1,8 @@
-//! Recording an episode: one row per step, written as CSV with fixed precision so the same
+//! A recorded episode: one row per step, written as CSV with fixed precision so the same
 //! seed gives the same bytes.
 
-use crate::env::{Env, SimError, StepInfo};
-use crate::policy::Policy;
+use crate::env::StepInfo;
 use mdrlat_core::Action;
-use mdrlat_geom::Pose2;
 use std::fmt::Write as _;
 
 /// One step of a trajectory.
@@ -47,39 +45,4 @@ impl TrajectoryRow {
         );
         s
     }
-}
-
-/// Runs `policy` for at most `max_steps` steps or until the episode ends, starting with
-/// `env.reset_with(seed, pose)` (`None`, `None`: continue the random streams, draw a pose),
-/// and calls `on_step` after every step (e.g. to write a row or draw a frame).
-///
-/// # Errors
-/// The reset found no free pose, or `on_step` failed.
-pub fn run_episode<E: From<SimError>>(
-    env: &mut Env,
-    policy: &mut dyn Policy,
-    seed: Option<u64>,
-    pose: Option<Pose2>,
-    max_steps: u32,
-    mut on_step: impl FnMut(&Env, &TrajectoryRow) -> Result<(), E>,
-) -> Result<Vec<TrajectoryRow>, E> {
-    env.reset_with(seed, pose)?;
-    let mut rows = Vec::new();
-    for _ in 0..max_steps {
-        let action = policy.act(env.observation());
-        let s = env.step(action)?;
-        let row = TrajectoryRow {
-            action,
-            reward: s.reward,
-            terminated: s.terminated,
-            truncated: s.truncated,
-            info: s.info,
-        };
-        rows.push(row);
-        on_step(env, &row)?;
-        if row.terminated || row.truncated {
-            break;
-        }
-    }
-    Ok(rows)
 }

@@ -14,6 +14,7 @@ use crate::config::SimConfig;
 use crate::env::{Env, Observation, SimError, StepInfo};
 use crate::scene::StaticScene;
 use mdrlat_core::Action;
+use mdrlat_geom::Pose2;
 use std::ops::Deref;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -43,12 +44,15 @@ pub struct VecStep {
 struct Chunk {
     envs: Vec<Env>,
     finals: Vec<Observation>,
-    actions: Vec<Action>,
-    /// Per environment: the last step's outcome.
-    results: Vec<Result<VecStep, SimError>>,
+    /// Per environment: the action of the next step (`None`: it sits this step out).
+    actions: Vec<Option<Action>>,
+    /// Per environment: the last step's outcome (`None`: it was not stepped).
+    results: Vec<Result<Option<VecStep>, SimError>>,
     /// A reset request: environment `first + i` takes stream `first + i` of the seed.
     reset_seed: Option<u64>,
     first: usize,
+    /// Finished episodes restart at once (else they wait for [`VecEnv::reset_env`]).
+    auto_reset: bool,
 }
 
 impl Chunk {
@@ -56,13 +60,18 @@ impl Chunk {
     fn run(&mut self) {
         if let Some(seed) = self.reset_seed.take() {
             for (i, (env, r)) in self.envs.iter_mut().zip(&mut self.results).enumerate() {
-                *r = env.reset_stream(seed, (self.first + i) as u64).map(|_| placeholder_step());
+                *r = env.reset_stream(seed, (self.first + i) as u64).map(|_| None);
             }
             return;
         }
+        let auto_reset = self.auto_reset;
         let it =
             self.envs.iter_mut().zip(&mut self.finals).zip(&self.actions).zip(&mut self.results);
         for (((env, fin), &a), out) in it {
+            let Some(a) = a else {
+                *out = Ok(None);
+                continue;
+            };
             let stepped = env.step(a).map(|s| VecStep {
                 reward: s.reward,
                 terminated: s.terminated,
@@ -70,30 +79,13 @@ impl Chunk {
                 info: s.info,
             });
             *out = stepped.and_then(|step| {
-                if step.terminated || step.truncated {
+                if auto_reset && (step.terminated || step.truncated) {
                     env.swap_observation(fin);
                     env.reset(None)?;
                 }
-                Ok(step)
+                Ok(Some(step))
             });
         }
-    }
-}
-
-fn placeholder_step() -> VecStep {
-    VecStep {
-        reward: 0.0,
-        terminated: false,
-        truncated: false,
-        info: StepInfo {
-            step: 0,
-            pose: Default::default(),
-            velocity: Default::default(),
-            command: Default::default(),
-            d_min: 0.0,
-            collision: None,
-            reward_terms: Default::default(),
-        },
     }
 }
 
@@ -162,6 +154,8 @@ pub struct VecEnv {
     workers: Vec<Worker>,
     control: Arc<Control>,
     outcomes: Vec<VecStep>,
+    masked: Vec<Option<VecStep>>,
+    auto_reset: bool,
 }
 
 /// An observation inside a [`VecEnv`], borrowed for as long as this guard lives.
@@ -179,6 +173,19 @@ impl Deref for ObservationRef<'_> {
         } else {
             self.chunk.envs[self.index].observation()
         }
+    }
+}
+
+/// An environment inside a [`VecEnv`], borrowed for as long as this guard lives.
+pub struct EnvRef<'a> {
+    chunk: MutexGuard<'a, Chunk>,
+    index: usize,
+}
+
+impl Deref for EnvRef<'_> {
+    type Target = Env;
+    fn deref(&self) -> &Env {
+        &self.chunk.envs[self.index]
     }
 }
 
@@ -217,6 +224,7 @@ impl VecEnv {
                 results: (0..len).map(|_| Err(SimError::NeedsReset)).collect(),
                 reset_seed: None,
                 first: bounds[k],
+                auto_reset: true,
             })));
         }
         let control = Arc::new(Control::default());
@@ -232,7 +240,25 @@ impl VecEnv {
                 Worker { handle }
             })
             .collect();
-        Ok(Self { chunks, bounds, workers, control, outcomes: Vec::with_capacity(n) })
+        Ok(Self {
+            chunks,
+            bounds,
+            workers,
+            control,
+            outcomes: Vec::with_capacity(n),
+            masked: Vec::with_capacity(n),
+            auto_reset: true,
+        })
+    }
+
+    /// Whether finished episodes restart at once (the default, for training) or wait, with
+    /// their final observation in place, for [`VecEnv::reset_env`] (the episode runner's
+    /// mode: it decides which episode an environment runs next).
+    pub fn set_auto_reset(&mut self, on: bool) {
+        self.auto_reset = on;
+        for c in &self.chunks {
+            lock(c).auto_reset = on;
+        }
     }
 
     /// Number of environments.
@@ -306,19 +332,91 @@ impl VecEnv {
         if actions.len() != self.len() {
             return Err(SimError::ActionCount { expected: self.len(), got: actions.len() });
         }
-        for (k, c) in self.chunks.iter().enumerate() {
-            let mut c = lock(c);
-            c.actions.clear();
-            c.actions.extend_from_slice(&actions[self.bounds[k]..self.bounds[k + 1]]);
-        }
-        self.run_all()?;
+        self.run_actions(actions.iter().map(|&a| Some(a)))?;
         self.outcomes.clear();
         for c in &self.chunks {
             for r in &lock(c).results {
-                self.outcomes.push(r.clone()?);
+                self.outcomes.push(r.clone()?.ok_or(SimError::NeedsReset)?);
             }
         }
         Ok(&self.outcomes)
+    }
+
+    /// Steps the environments whose action is `Some`; the others sit this step out (their
+    /// outcome is `None`). Finished episodes restart only with auto-reset on.
+    ///
+    /// # Errors
+    /// Wrong number of actions, or a step of an environment whose episode has ended.
+    pub fn step_masked(
+        &mut self,
+        actions: &[Option<Action>],
+    ) -> Result<&[Option<VecStep>], SimError> {
+        if actions.len() != self.len() {
+            return Err(SimError::ActionCount { expected: self.len(), got: actions.len() });
+        }
+        self.run_actions(actions.iter().copied())?;
+        self.masked.clear();
+        self.outcomes.clear();
+        for c in &self.chunks {
+            for r in &lock(c).results {
+                self.masked.push(r.clone()?);
+            }
+        }
+        Ok(&self.masked)
+    }
+
+    fn run_actions(
+        &mut self,
+        actions: impl Iterator<Item = Option<Action>>,
+    ) -> Result<(), SimError> {
+        let mut actions = actions;
+        for (k, c) in self.chunks.iter().enumerate() {
+            let mut c = lock(c);
+            c.actions.clear();
+            c.actions.extend(actions.by_ref().take(self.bounds[k + 1] - self.bounds[k]));
+        }
+        self.run_all()
+    }
+
+    /// Starts a new episode in environment `i` alone, on the calling thread, as
+    /// [`Env::reset_with`] does: `Some(seed)` reseeds its streams (stream 0 of `seed`: the
+    /// same start as `Env::reset(Some(seed))`), `pose` fixes the start.
+    ///
+    /// # Errors
+    /// No collision-free pose could be drawn.
+    ///
+    /// # Panics
+    /// If `i >= len()`.
+    pub fn reset_env(
+        &mut self,
+        i: usize,
+        seed: Option<u64>,
+        pose: Option<Pose2>,
+    ) -> Result<(), SimError> {
+        let (k, index) = self.locate(i);
+        let mut chunk = lock(&self.chunks[k]);
+        chunk.envs[index].reset_with(seed, pose)?;
+        chunk.results[index] = Ok(None);
+        Ok(())
+    }
+
+    /// Calls `f` with the current observation of every environment, in order (one lock per
+    /// thread's share, held while `f` runs): a batched policy reads them all at once.
+    pub fn with_observations<R>(&self, f: impl FnOnce(&[&Observation]) -> R) -> R {
+        let guards: Vec<MutexGuard<'_, Chunk>> = self.chunks.iter().map(|c| lock(c)).collect();
+        let obs: Vec<&Observation> =
+            guards.iter().flat_map(|g| g.envs.iter().map(Env::observation)).collect();
+        f(&obs)
+    }
+
+    /// Environment `i` itself (to draw it, or read its pedestrians), borrowed for as long as
+    /// the guard lives.
+    ///
+    /// # Panics
+    /// If `i >= len()`.
+    pub fn env(&self, i: usize) -> EnvRef<'_> {
+        let (k, index) = self.locate(i);
+        EnvRef { chunk: lock(&self.chunks[k]), index }
     }
 
     fn locate(&self, i: usize) -> (usize, usize) {

@@ -3,8 +3,11 @@
 
 use mdrlat_core::{Action, FRAME_STACK};
 use mdrlat_geom::Pose2;
-use mdrlat_sim::rollout::{CSV_HEADER, run_episode};
-use mdrlat_sim::{Collision, Env, RandomPolicy, SimConfig, StaticScene, VecEnv};
+use mdrlat_sim::rollout::{CSV_HEADER, TrajectoryRow};
+use mdrlat_sim::{
+    Collision, Env, EpisodeSpec, Quiet, RandomPolicy, RunOptions, SimConfig, StaticScene, VecEnv,
+    run_episodes,
+};
 use mdrlat_world::World;
 use std::sync::Arc;
 
@@ -140,18 +143,28 @@ fn odometry_history_is_the_last_three_true_velocities() {
     );
 }
 
+/// A random-policy episode seeded `seed` through the episode runner, and the final frames.
+fn random_episode(world: &World, seed: u64, steps: u32) -> (Vec<TrajectoryRow>, Vec<u8>) {
+    let config = SimConfig::default();
+    let scene = Arc::new(StaticScene::new(Arc::new(world.clone()), &config));
+    let mut venv = VecEnv::new(scene, config, 1, 1).expect("venv");
+    let mut policy = RandomPolicy::new(seed);
+    let spec = EpisodeSpec { seed: Some(seed), pose: None };
+    let options = RunOptions { max_steps: steps, record_rows: true };
+    let mut outcomes =
+        run_episodes(&mut venv, &mut policy, &[spec], &options, &mut Quiet).expect("episode");
+    let rows = outcomes.pop().expect("one episode").rows;
+    let frames = frames_bytes(&venv.env(0));
+    (rows, frames)
+}
+
 #[test]
 fn same_seed_same_bytes_and_different_seed_differs() {
     let world = mdrlat_world::builtin::get("example").expect("builtin").expect("valid");
     let run = |seed: u64| {
-        let mut env = Env::from_world(world.clone(), SimConfig::default()).expect("env");
-        let mut policy = RandomPolicy::new(seed);
-        let rows = run_episode(&mut env, &mut policy, Some(seed), None, 120, |_, _| {
-            Ok::<_, mdrlat_sim::SimError>(())
-        })
-        .expect("episode");
+        let (rows, frames) = random_episode(&world, seed, 120);
         let csv: String = rows.iter().map(|r| r.to_csv() + "\n").collect();
-        (csv, frames_bytes(&env))
+        (csv, frames)
     };
     let (a, fa) = run(7);
     let (b, fb) = run(7);
@@ -165,19 +178,14 @@ fn same_seed_same_bytes_and_different_seed_differs() {
 #[test]
 fn golden_rollout_hash() {
     let world = mdrlat_world::builtin::get("example").expect("builtin").expect("valid");
-    let mut env = Env::from_world(world, SimConfig::default()).expect("env");
-    let mut policy = RandomPolicy::new(42);
-    let rows = run_episode(&mut env, &mut policy, Some(42), None, 200, |_, _| {
-        Ok::<_, mdrlat_sim::SimError>(())
-    })
-    .expect("episode");
+    let (rows, frames) = random_episode(&world, 42, 200);
     let mut csv = String::from(CSV_HEADER);
     csv.push('\n');
     for r in &rows {
         csv.push_str(&r.to_csv());
         csv.push('\n');
     }
-    let h = (fnv1a(csv.as_bytes()), fnv1a(&frames_bytes(&env)));
+    let h = (fnv1a(csv.as_bytes()), fnv1a(&frames));
     assert_eq!(h, (GOLDEN.0, GOLDEN.1), "golden rollout changed ({} steps):\n{csv}", rows.len());
 }
 const GOLDEN: (u64, u64) = (3499768905222996766, 14074824012068988481);

@@ -78,7 +78,7 @@ pub fn infer_ms(
         .expect("inference thread pool");
     pool.install(|| {
         median_ms(min_time, || {
-            learner.greedy(&inputs);
+            let _ = learner.greedy(&inputs);
         })
     })
 }

@@ -4,7 +4,10 @@
 use crate::adam::{AdamCounts, FusedAdam};
 use crate::config::TrainConfig;
 use crate::replay::Batch;
-use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY};
+use mdrlat_core::{
+    Action, DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY, PolicyError,
+    greedy_actions,
+};
 use mdrlat_nn::burn::module::Module;
 use mdrlat_nn::burn::optim::{GradientsParams, ModuleOptimizer};
 use mdrlat_nn::burn::prelude::*;
@@ -82,12 +85,39 @@ pub(crate) fn tensor4(data: &[f32], b: usize, device: &Device) -> mdrlat_nn::Dep
     mdrlat_nn::depth_input(data, b, DEPTH_ROWS, DEPTH_COLS, device)
 }
 
-/// The index of the largest value (the first on ties; 0 for an empty row or all NaN).
-pub fn argmax(row: &[f32]) -> usize {
-    row.iter()
-        .enumerate()
-        .fold((0, f32::NEG_INFINITY), |best, (i, &v)| if v > best.1 { (i, v) } else { best })
-        .0
+/// Q-values `[B][actions]` (row-major) of `net`, a `variant` network without autodiff on
+/// `device`, for a batch of network inputs: the one forward every greedy decision uses.
+///
+/// # Errors
+/// Inputs of the wrong size for the batch, or a backend failure.
+pub(crate) fn q_forward(
+    net: &QNet,
+    variant: Variant,
+    device: &Device,
+    inputs: &Inputs,
+) -> Result<Vec<f32>, PolicyError> {
+    let b = inputs.size;
+    if variant.uses_laser() && inputs.laser.len() != b * FRAME_STACK * LASER_BEAMS {
+        return Err(PolicyError::Backend(format!(
+            "laser input has {} values, expected {b} x 4 x 512",
+            inputs.laser.len()
+        )));
+    }
+    if variant.uses_depth() && inputs.depth.len() != b * FRAME_STACK * DEPTH_ROWS * DEPTH_COLS {
+        return Err(PolicyError::Backend(format!(
+            "depth input has {} values, expected {b} x 4 x 128 x 160",
+            inputs.depth.len()
+        )));
+    }
+    if b == 0 {
+        return Ok(Vec::new());
+    }
+    let l = variant.uses_laser().then(|| tensor3(&inputs.laser, b, device));
+    let d = variant.uses_depth().then(|| tensor4(&inputs.depth, b, device));
+    let q = net.forward(l, d, None).q;
+    q.into_data()
+        .try_to_vec::<f32>()
+        .map_err(|e| PolicyError::Backend(format!("reading Q-values: {e:?}")))
 }
 
 /// Loads burnpack weights at `path` into `net`, which must be a `variant` network.
@@ -166,18 +196,38 @@ impl Learner {
         )
     }
 
-    /// Q-values of the online network for a batch of observations, `[B][actions]` row-major.
+    /// Q-values of the online network for a batch of network inputs, `[B][actions]`
+    /// row-major (empty if the backend failed).
     pub fn q_values(&self, inputs: &Inputs) -> Vec<f32> {
-        let (l, d) = self.inputs::<false>(&inputs.laser, &inputs.depth, inputs.size);
-        let q = self.plain.forward(l, d, None).q;
-        q.into_data().try_to_vec::<f32>().unwrap_or_default()
+        q_forward(&self.plain, self.variant, &self.device, inputs).unwrap_or_default()
     }
 
-    /// The greedy action of each observation (Algorithm 1, line 3, without exploration).
-    pub fn greedy(&self, inputs: &Inputs) -> Vec<usize> {
-        let q = self.q_values(inputs);
-        let actions = q.len() / inputs.size.max(1);
-        q.chunks(actions.max(1)).map(argmax).collect()
+    /// The greedy action of each row of `inputs` (Algorithm 1, line 3, without
+    /// exploration), by the one rule of [`mdrlat_core::greedy_actions`].
+    ///
+    /// # Errors
+    /// A non-finite Q-value (the network diverged), or a backend failure.
+    pub fn greedy(&self, inputs: &Inputs) -> Result<Vec<Action>, PolicyError> {
+        let q = q_forward(&self.plain, self.variant, &self.device, inputs)?;
+        let mut out = Vec::with_capacity(inputs.size);
+        greedy_actions(&q, inputs.size, &mut out)?;
+        Ok(out)
+    }
+
+    /// The online network's greedy policy (a snapshot of the current weights), acting on
+    /// `threads` CPU threads: training's evaluation runs it through the episode runner.
+    /// Drop it before the next update, so the fused Adam may write the weights in place.
+    ///
+    /// # Errors
+    /// The thread pool cannot start.
+    pub fn greedy_policy(&self, threads: usize) -> Result<crate::GreedyPolicy, String> {
+        crate::GreedyPolicy::from_net(
+            self.variant,
+            self.plain.clone(),
+            &self.device,
+            threads,
+            format!("online network, update {}", self.updates),
+        )
     }
 
     /// Algorithm 1, lines 7–11, eq. (10): `y = r + γ (1 − terminated) Q⁻(s', argmax_a' Q(s', a'))`.

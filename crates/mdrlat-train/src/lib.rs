@@ -16,6 +16,6 @@ pub mod train;
 
 pub use config::{TrainConfig, TrainConfigError};
 pub use learner::{Inputs, Learner, Losses};
-pub use policy::GreedyPolicy;
+pub use policy::{GreedyPolicy, observation_inputs};
 pub use replay::{Batch, ReplayBuffer, Transition};
-pub use train::{Evaluation, Status, TrainError, TrainReport, evaluate, observation_inputs, train};
+pub use train::{Evaluation, Status, TrainError, TrainReport, evaluate, train};

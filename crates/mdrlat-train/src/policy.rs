@@ -1,20 +1,26 @@
-//! A network that acts: greedy decisions on one observation at a time, from a trained run
-//! or freshly initialised, for `mdrlat ros` and anything else that deploys a policy.
+//! A network that acts: greedy decisions for a batch of observations, from a trained run,
+//! the learner's current weights or a fresh initialisation — behind the one
+//! [`mdrlat_core::Policy`] interface that `mdrlat eval`, training's evaluation, `rollout`
+//! and the ROS node call.
 
 use crate::checkpoint::read_meta;
-use crate::learner::{argmax, read_net, tensor3, tensor4};
-use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS};
+use crate::learner::{Inputs, q_forward, read_net};
+use mdrlat_core::{
+    Action, FRAME_STACK, Observation, Policy, PolicyError, Sensors, greedy_actions,
+    normalize_depth, normalize_laser,
+};
 use mdrlat_nn::burn::prelude::*;
 use mdrlat_nn::{QNet, QNetConfig, Variant};
 use std::path::{Path, PathBuf};
 
-/// A Q-network acting greedily (no exploration) on single observations.
+/// A Q-network acting greedily (no exploration) on batches of observations.
 pub struct GreedyPolicy {
     variant: Variant,
     net: QNet,
     device: Device,
     pool: rayon::ThreadPool,
     source: String,
+    inputs: Inputs,
 }
 
 impl std::fmt::Debug for GreedyPolicy {
@@ -29,6 +35,9 @@ impl std::fmt::Debug for GreedyPolicy {
 /// The checkpoint folder `path` names: a checkpoint folder itself, or a run directory
 /// (its `checkpoint/`, or `checkpoint.old/` if a run was killed during a swap).
 fn checkpoint_dir(path: &Path) -> Result<PathBuf, String> {
+    if !path.exists() {
+        return Err(format!("{}: no such run directory or checkpoint", path.display()));
+    }
     [path.to_path_buf(), path.join("checkpoint"), path.join("checkpoint.old")]
         .into_iter()
         .find(|d| d.join("meta.json").is_file())
@@ -49,6 +58,35 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool, String> {
         .map_err(|e| format!("inference thread pool: {e}"))
 }
 
+/// Writes the network inputs of `batch` for `variant` into `inputs` (one row per
+/// observation, oldest frame first) through the shared normalisation of `mdrlat_core`.
+pub fn observation_inputs(batch: &[&Observation], variant: Variant, inputs: &mut Inputs) {
+    inputs.size = batch.len();
+    let fill = |out: &mut Vec<f32>,
+                stack: fn(&Observation) -> &mdrlat_core::FrameStack,
+                f: fn(&[f32], &mut [f32])| {
+        let Some(first) = batch.first() else {
+            out.clear();
+            return;
+        };
+        let n = FRAME_STACK * stack(first).frame_len();
+        out.resize(n * batch.len(), 0.0);
+        for (obs, row) in batch.iter().zip(out.chunks_exact_mut(n)) {
+            stack(obs).write_stacked(row, f);
+        }
+    };
+    if variant.uses_laser() {
+        fill(&mut inputs.laser, |o| &o.laser, normalize_laser);
+    } else {
+        inputs.laser.clear();
+    }
+    if variant.uses_depth() {
+        fill(&mut inputs.depth, |o| &o.depth, normalize_depth);
+    } else {
+        inputs.depth.clear();
+    }
+}
+
 impl GreedyPolicy {
     /// The online network of a run's checkpoint (`path`: a run directory or a checkpoint
     /// folder), computing on `threads` CPU threads.
@@ -61,13 +99,13 @@ impl GreedyPolicy {
         let meta = read_meta(&dir).map_err(|e| e.to_string())?;
         let mut net = QNetConfig::new(meta.variant).init(device);
         read_net(&mut net, &dir.join("online.bpk"), meta.variant)?;
-        Ok(Self {
-            variant: meta.variant,
+        Self::from_net(
+            meta.variant,
             net,
-            device: device.clone(),
-            pool: pool(threads)?,
-            source: format!("{} (step {})", dir.display(), meta.step),
-        })
+            device,
+            threads,
+            format!("{}, step {}", path.display(), meta.step),
+        )
     }
 
     /// A freshly initialised `variant` network (seeded), for testing a deployment before
@@ -81,12 +119,29 @@ impl GreedyPolicy {
         device: &Device,
         threads: usize,
     ) -> Result<Self, String> {
+        let net = QNetConfig::new(variant).init_seeded(device, seed);
+        Self::from_net(variant, net, device, threads, format!("untrained, seed {seed}"))
+    }
+
+    /// A policy over `net`, a `variant` network without autodiff on `device`; `source`
+    /// says where its weights came from.
+    ///
+    /// # Errors
+    /// The thread pool cannot start.
+    pub fn from_net(
+        variant: Variant,
+        net: QNet,
+        device: &Device,
+        threads: usize,
+        source: String,
+    ) -> Result<Self, String> {
         Ok(Self {
             variant,
-            net: QNetConfig::new(variant).init_seeded(device, seed),
+            net,
             device: device.clone(),
             pool: pool(threads)?,
-            source: format!("untrained, seed {seed}"),
+            source,
+            inputs: Inputs::default(),
         })
     }
 
@@ -100,36 +155,38 @@ impl GreedyPolicy {
         &self.source
     }
 
-    /// Q-values of one observation: `laser` `[4, 512]` and `depth` `[4, 128, 160]`,
-    /// normalised (empty when the variant does not use the sensor).
+    /// Q-values `[B][actions]` (row-major) for a batch of network inputs (normalised, in
+    /// the network's layout; see [`observation_inputs`]).
     ///
     /// # Errors
     /// Inputs of the wrong size, or a backend failure.
-    pub fn q_values(&self, laser: &[f32], depth: &[f32]) -> Result<Vec<f32>, String> {
-        let v = self.variant;
-        if v.uses_laser() && laser.len() != FRAME_STACK * LASER_BEAMS {
-            return Err(format!("laser input has {} values, expected 4 x 512", laser.len()));
-        }
-        if v.uses_depth() && depth.len() != FRAME_STACK * DEPTH_LEN {
-            return Err(format!("depth input has {} values, expected 4 x 128 x 160", depth.len()));
-        }
-        self.pool.install(|| {
-            let l = v.uses_laser().then(|| tensor3(laser, 1, &self.device));
-            let d = v.uses_depth().then(|| tensor4(depth, 1, &self.device));
-            let q = self.net.forward(l, d, None).q;
-            q.into_data().try_to_vec::<f32>().map_err(|e| format!("reading Q-values: {e:?}"))
-        })
+    pub fn q_values(&self, inputs: &Inputs) -> Result<Vec<f32>, PolicyError> {
+        self.pool.install(|| q_forward(&self.net, self.variant, &self.device, inputs))
+    }
+}
+
+impl Policy for GreedyPolicy {
+    fn name(&self) -> String {
+        format!("{} ({})", self.variant, self.source)
     }
 
-    /// The greedy action index of one observation (see [`GreedyPolicy::q_values`]).
-    ///
-    /// # Errors
-    /// See [`GreedyPolicy::q_values`].
-    pub fn act(&self, laser: &[f32], depth: &[f32]) -> Result<usize, String> {
-        let q = self.q_values(laser, depth)?;
-        if q.iter().any(|x| !x.is_finite()) {
-            return Err(format!("non-finite Q-values {q:?}"));
+    fn sensors(&self) -> Sensors {
+        Sensors { laser: self.variant.uses_laser(), depth: self.variant.uses_depth() }
+    }
+
+    fn act(
+        &mut self,
+        batch: &[&Observation],
+        slots: &[usize],
+        out: &mut Vec<Action>,
+    ) -> Result<(), PolicyError> {
+        if batch.len() != slots.len() {
+            return Err(PolicyError::Count { expected: slots.len(), got: batch.len() });
         }
-        Ok(argmax(&q))
+        let mut inputs = std::mem::take(&mut self.inputs);
+        observation_inputs(batch, self.variant, &mut inputs);
+        let q = self.q_values(&inputs);
+        self.inputs = inputs;
+        greedy_actions(&q?, batch.len(), out)
     }
 }

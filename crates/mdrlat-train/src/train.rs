@@ -5,12 +5,15 @@
 use crate::checkpoint::{self, Meta, Window, frame_reserve};
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner, Losses};
+use crate::policy::observation_inputs;
 use crate::replay::{Batch, ReplayBuffer, Transition};
 use crate::tensorboard::EventWriter;
-use mdrlat_core::{Action, FRAME_STACK, ODOM_HISTORY, Rng, normalize_depth, normalize_laser};
-use mdrlat_nn::Variant;
+use mdrlat_core::{Action, FRAME_STACK, ODOM_HISTORY, PolicyError, Rng};
 use mdrlat_nn::burn::prelude::Device;
-use mdrlat_sim::{Env, Observation, SimConfig, SimError, StaticScene};
+use mdrlat_sim::{
+    Env, EpisodeSpec, Observation, Quiet, RunError, RunOptions, SimConfig, SimError, StaticScene,
+    VecEnv, run_episodes,
+};
 use mdrlat_world::World;
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -31,6 +34,22 @@ pub enum TrainError {
     /// The simulator failed.
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// The network could not decide (non-finite Q-values: the run diverged).
+    #[error("acting at step {step}: {source}")]
+    Policy {
+        /// Environment step.
+        step: u64,
+        /// What went wrong.
+        source: PolicyError,
+    },
+    /// A greedy evaluation failed.
+    #[error("evaluation at step {step}: {source}")]
+    Evaluation {
+        /// Environment step.
+        step: u64,
+        /// What went wrong.
+        source: RunError,
+    },
     /// A checkpoint is missing, corrupt or of another run.
     #[error("{path}: {problem}")]
     Checkpoint {
@@ -73,9 +92,22 @@ pub struct Evaluation {
     pub rewards: Vec<f32>,
     /// Length of each episode.
     pub lengths: Vec<u32>,
+    /// Whether each episode ended in a collision.
+    pub collisions: Vec<bool>,
 }
 
 impl Evaluation {
+    /// Share of episodes without a collision (the paper's success, here over the training
+    /// world's episode length).
+    pub fn success_rate(&self) -> f32 {
+        let ok = self.collisions.iter().filter(|c| !**c).count();
+        ok as f32 / self.collisions.len().max(1) as f32
+    }
+    /// Share of episodes that ended in a collision.
+    pub fn collision_rate(&self) -> f32 {
+        1.0 - self.success_rate()
+    }
+
     /// Mean accumulated reward.
     pub fn mean(&self) -> f32 {
         self.rewards.iter().sum::<f32>() / self.rewards.len().max(1) as f32
@@ -102,20 +134,6 @@ pub struct TrainReport {
     pub evaluations: Vec<Evaluation>,
     /// Wall time, seconds.
     pub seconds: f64,
-}
-
-/// Writes the network input of `obs` for `variant` into `inputs` (one row), through the
-/// shared normalisation of `mdrlat_core`.
-pub fn observation_inputs(obs: &Observation, variant: Variant, inputs: &mut Inputs) {
-    inputs.size = 1;
-    if variant.uses_laser() {
-        inputs.laser.resize(FRAME_STACK * obs.laser.frame_len(), 0.0);
-        obs.laser.write_stacked(&mut inputs.laser, normalize_laser);
-    }
-    if variant.uses_depth() {
-        inputs.depth.resize(FRAME_STACK * obs.depth.frame_len(), 0.0);
-        obs.depth.write_stacked(&mut inputs.depth, normalize_depth);
-    }
 }
 
 fn odom_of(obs: &Observation) -> [f32; 2 * ODOM_HISTORY] {
@@ -150,36 +168,32 @@ impl Csv {
     }
 }
 
-/// Greedy episodes from the fixed start poses `eval_seed + k` (the same for every run).
+/// Greedy episodes of the learner's online network from the fixed start poses
+/// `eval_seed + k` (the same for every run), one per environment of `venv`, through the
+/// episode runner; each runs to the environment's own end (collision or time limit).
 ///
 /// # Errors
-/// The simulator failed to reset.
+/// The simulator failed to reset, or the network could not decide.
 pub fn evaluate(
-    env: &mut Env,
+    venv: &mut VecEnv,
     learner: &Learner,
     config: &TrainConfig,
     step: u64,
-) -> Result<Evaluation, SimError> {
-    let mut eval = Evaluation { step, rewards: Vec::new(), lengths: Vec::new() };
-    let mut inputs = Inputs::default();
-    for k in 0..u64::from(config.eval_episodes) {
-        env.reset(Some(config.eval_seed + k))?;
-        let (mut total, mut length) = (0.0f32, 0u32);
-        loop {
-            observation_inputs(env.observation(), config.variant, &mut inputs);
-            let a = learner.greedy(&inputs)[0];
-            let s =
-                env.step(Action::new(a).unwrap_or_else(|| unreachable!("network has 10 outputs")))?;
-            total += s.reward;
-            length += 1;
-            if s.terminated || s.truncated {
-                break;
-            }
-        }
-        eval.rewards.push(total);
-        eval.lengths.push(length);
-    }
-    Ok(eval)
+) -> Result<Evaluation, TrainError> {
+    let eval_error = |source| TrainError::Evaluation { step, source };
+    let mut policy =
+        learner.greedy_policy(1).map_err(|e| eval_error(RunError::Observer(e.into())))?;
+    let specs: Vec<EpisodeSpec> = (0..u64::from(config.eval_episodes))
+        .map(|k| EpisodeSpec { seed: Some(config.eval_seed + k), pose: None })
+        .collect();
+    let outcomes = run_episodes(venv, &mut policy, &specs, &RunOptions::default(), &mut Quiet)
+        .map_err(eval_error)?;
+    Ok(Evaluation {
+        step,
+        rewards: outcomes.iter().map(|o| o.reward).collect(),
+        lengths: outcomes.iter().map(|o| o.steps).collect(),
+        collisions: outcomes.iter().map(|o| !o.success()).collect(),
+    })
 }
 
 /// Keeps the rows of a run's CSV file before `step` (and at `step` with `keep_step`): those
@@ -220,7 +234,10 @@ pub fn train(
     let started = Instant::now();
     let scene = Arc::new(StaticScene::new(Arc::new(world), sim));
     let mut env = Env::new(scene.clone(), sim.clone())?;
-    let mut eval_env = Env::new(scene, sim.clone())?;
+    // One environment per evaluation episode, stepped on this thread, the network deciding
+    // for all of them at once.
+    let slots = config.eval_episodes.min(32) as usize;
+    let mut eval_envs = VecEnv::new(scene, sim.clone(), slots, 1)?;
     let variant = config.variant;
     let push_latest = |replay: &mut ReplayBuffer, obs: &Observation| {
         replay.push_frame(obs.laser.latest(), obs.depth.latest())
@@ -269,7 +286,7 @@ pub fn train(
         )?;
         let evals = Csv::create(
             dir.join("eval.csv"),
-            "step,eval_reward_mean,eval_reward_std,eval_length_mean",
+            "step,eval_reward_mean,eval_reward_std,eval_length_mean,eval_success_rate,eval_collision_rate",
         )?;
         (Learner::new(config, device), replay, run, metrics, evals)
     };
@@ -293,8 +310,10 @@ pub fn train(
         let action = if run.explore_rng.uniform() < f64::from(epsilon) {
             run.explore_rng.below(Action::COUNT)
         } else {
-            observation_inputs(env.observation(), variant, &mut inputs);
-            learner.greedy(&inputs)[0]
+            observation_inputs(&[env.observation()], variant, &mut inputs);
+            let greedy =
+                learner.greedy(&inputs).map_err(|source| TrainError::Policy { step: t, source })?;
+            greedy[0].index()
         };
         let odom = odom_of(env.observation());
         // Line 4: execute a_k, observe r_k and s_{k+1}.
@@ -381,10 +400,16 @@ pub fn train(
             }
         }
         if t % config.eval_interval == 0 {
-            let e = evaluate(&mut eval_env, &learner, config, t)?;
+            let e = evaluate(&mut eval_envs, &learner, config, t)?;
             let mean_len = e.lengths.iter().map(|&l| f64::from(l)).sum::<f64>()
                 / e.lengths.len().max(1) as f64;
-            evals_csv.line(&format!("{t},{:.6},{:.6},{mean_len:.2}", e.mean(), e.std()))?;
+            evals_csv.line(&format!(
+                "{t},{:.6},{:.6},{mean_len:.2},{:.6},{:.6}",
+                e.mean(),
+                e.std(),
+                e.success_rate(),
+                e.collision_rate()
+            ))?;
             events
                 .scalars(
                     t,
@@ -392,6 +417,8 @@ pub fn train(
                         ("eval/reward_mean", e.mean()),
                         ("eval/reward_std", e.std()),
                         ("eval/length_mean", mean_len as f32),
+                        ("eval/success_rate", e.success_rate()),
+                        ("eval/collision_rate", e.collision_rate()),
                     ],
                 )
                 .map_err(|e| tb_err(&events, e))?;

@@ -40,13 +40,13 @@ fn only_termination_zeroes_the_bootstrap_and_the_online_net_picks() {
     let q_target = learner.target_q_next(&b);
     let next = mdrlat_train::Inputs { size: 4, laser: b.next_laser.clone(), depth: vec![] };
     assert_ne!(learner.q_values(&next), q_target, "the networks diverged");
-    let greedy = learner.greedy(&next);
+    let greedy = learner.greedy(&next).expect("finite Q-values");
     for row in 0..4 {
         let expect = if b.terminated[row] == 1.0 {
             b.rewards[row]
         } else {
             // Double DQN (eq. 10): the online network picks, the target network evaluates.
-            b.rewards[row] + 0.99 * q_target[row * 10 + greedy[row]]
+            b.rewards[row] + 0.99 * q_target[row * 10 + greedy[row].index()]
         };
         assert!((y[row] - expect).abs() < 1e-5, "row {row}: {} vs {expect}", y[row]);
     }

@@ -4,7 +4,7 @@
 use super::bench::cpu_model;
 use super::train::DeviceKind;
 use anyhow::{Context, Result, bail};
-use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS};
+use mdrlat_core::{FRAME_STACK, Observation, Policy};
 use mdrlat_nn::Variant;
 use mdrlat_ros::msg::{Image, LaserScan, Odometry, Twist};
 use mdrlat_ros::{ControllerConfig, Node, NodeConfig, Trigger};
@@ -74,14 +74,18 @@ pub fn run(a: &RosArgs) -> Result<()> {
     }
     let device = a.device.device();
     // Inference alone, one decision at a time on one core.
-    let policy = GreedyPolicy::untrained(a.variant, 0, &device, 1).map_err(anyhow::Error::msg)?;
-    let laser = vec![0.5; if a.variant.uses_laser() { FRAME_STACK * LASER_BEAMS } else { 0 }];
-    let depth = vec![0.3; if a.variant.uses_depth() { FRAME_STACK * DEPTH_LEN } else { 0 }];
-    let mut infer = Vec::new();
+    let mut policy =
+        GreedyPolicy::untrained(a.variant, 0, &device, 1).map_err(anyhow::Error::msg)?;
+    let mut obs = Observation::zeros();
+    for _ in 0..FRAME_STACK {
+        obs.laser.push_slot().fill(2.8);
+        obs.depth.push_slot().fill(1.5);
+    }
+    let (mut infer, mut actions) = (Vec::new(), Vec::new());
     let start = Instant::now();
     while infer.len() < 20 || start.elapsed() < Duration::from_secs(2) {
         let t = Instant::now();
-        policy.act(&laser, &depth).map_err(anyhow::Error::msg)?;
+        policy.act(&[&obs], &[0], &mut actions)?;
         infer.push(t.elapsed().as_secs_f64() * 1e3);
     }
     infer.sort_by(f64::total_cmp);
@@ -126,9 +130,7 @@ pub fn run(a: &RosArgs) -> Result<()> {
         let (stop, config) = (stop.clone(), config.clone());
         let policy =
             GreedyPolicy::untrained(a.variant, 0, &device, 1).map_err(anyhow::Error::msg)?;
-        std::thread::spawn(move || {
-            mdrlat_ros::run(&config, Box::new(super::ros::Deployed(policy)), &stop, &|_| {})
-        })
+        std::thread::spawn(move || mdrlat_ros::run(&config, Box::new(policy), &stop, &|_| {}))
     };
     let arrived = || arrivals.lock().unwrap_or_else(std::sync::PoisonError::into_inner).len();
     let deadline = Instant::now() + Duration::from_secs(10);

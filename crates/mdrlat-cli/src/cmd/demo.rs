@@ -2,12 +2,13 @@
 //! rendered to a GIF and pictures, every built-in world drawn, and the simulator benchmark.
 
 use super::bench::{SimArgs, cpu_model, measure};
-use super::rollout::{PolicyKind, Recorder, make_policy};
-use super::{ensure_dir, load_world, make_env, px_per_m};
+use super::rollout::{Recorder, parse_scripted, single_env};
+use super::{ensure_dir, load_world, px_per_m};
 use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result};
 use mdrlat_render::{Scene, top_view};
+use mdrlat_sim::{EpisodeSpec, Scripted};
 use std::path::PathBuf;
 
 /// Arguments of `mdrlat demo`.
@@ -24,8 +25,8 @@ pub struct Args {
     #[arg(long, default_value_t = 300)]
     steps: u32,
     /// Who drives (no trained network yet: a scripted policy).
-    #[arg(long, value_enum, default_value = "wander")]
-    policy: PolicyKind,
+    #[arg(long, default_value = "wander", value_parser = parse_scripted)]
+    policy: Scripted,
     /// Output directory.
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
@@ -39,29 +40,31 @@ pub fn run(a: &Args) -> Result<()> {
     let config = Config::default();
     ensure_dir(&a.out)?;
     let world = load_world(&a.world)?;
-    let mut env = make_env(world, &config.sim)?;
-    let mut policy = make_policy(a.policy, &env, a.seed);
-    env.reset(Some(a.seed))?;
-    let scale = px_per_m(env.world(), 480.0);
+    let world_name = world.name.clone();
+    let scale = px_per_m(&world, 480.0);
+    let mut venv = single_env(world, &config.sim)?;
+    let mut policy = a.policy.build(&config.sim, a.seed);
     let gif_path = a.out.join("episode.gif");
     let csv_path = a.out.join("trajectory.csv");
     let mut rec = Recorder::create(&csv_path, Some(&gif_path), scale)?;
-    let start_caption = format!("{}  seed {}  start", env.world().name, a.seed);
-    rec.frame(&env, &[env.pose().position()], &start_caption, false)?;
+    venv.reset_env(0, Some(a.seed), None)?;
+    let start_pose = {
+        let env = venv.env(0);
+        let start_caption = format!("{}  seed {}  start", env.world().name, a.seed);
+        rec.frame(&env, &[env.pose().position()], &start_caption, false)?;
+        env.pose()
+    };
     if let Some(start) = &rec.last_frame {
         start.save_png(&a.out.join("start.png"))?;
     }
     let pb = progress::bar(u64::from(a.steps), "episode");
-    let start_pose = Some(env.pose());
-    let rows =
-        rec.episode(&mut env, policy.as_mut(), (Some(a.seed), start_pose), a.steps, "", || {
-            pb.inc(1)
-        })?;
-    pb.finish_and_clear();
+    let spec = EpisodeSpec { seed: Some(a.seed), pose: Some(start_pose) };
+    let outcomes = rec.run(&mut venv, policy.as_mut(), &[spec], a.steps, Some(pb))?;
     if let Some(end) = &rec.last_frame {
         end.save_png(&a.out.join("end.png"))?;
     }
     rec.finish()?;
+    let rows = outcomes.first().map(|o| o.rows.as_slice()).unwrap_or_default();
     let row = rows.last().context("the episode took no step (--steps 0?)")?;
     let sum: f32 = rows.iter().map(|r| r.reward).sum();
     let ending = match (row.terminated, row.info.collision) {
@@ -70,10 +73,10 @@ pub fn run(a: &Args) -> Result<()> {
         _ => "step budget".to_string(),
     };
     out!(
-        "episode in '{}' (seed {}, {:?} policy): {} steps, reward {:.2}, ended by {}",
-        env.world().name,
+        "episode in '{}' (seed {}, {} policy): {} steps, reward {:.2}, ended by {}",
+        world_name,
         a.seed,
-        a.policy,
+        a.policy.name(),
         row.info.step,
         sum,
         ending

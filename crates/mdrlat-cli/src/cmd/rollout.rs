@@ -1,44 +1,31 @@
-//! `mdrlat rollout`: episodes with a scripted policy, as CSV (and optionally a GIF).
+//! `mdrlat rollout`: episodes with a scripted policy, as CSV (and optionally a GIF), run
+//! through the one episode runner.
 
-use super::{ensure_parent, load_world, make_env, parse_pose, px_per_m, snapshot};
+use super::{ensure_parent, load_world, parse_pose, px_per_m, snapshot};
 use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result};
-use mdrlat_core::Action;
-use mdrlat_geom::{Pose2, Vec2};
+use indicatif::ProgressBar;
+use mdrlat_geom::Vec2;
 use mdrlat_render::{GifWriter, Image};
-use mdrlat_sim::rollout::{CSV_HEADER, TrajectoryRow, run_episode};
-use mdrlat_sim::{ConstantPolicy, Env, Policy, RandomPolicy, WanderPolicy};
+use mdrlat_sim::rollout::{CSV_HEADER, TrajectoryRow};
+use mdrlat_sim::{
+    Env, EpisodeOutcome, EpisodeSpec, Observer, RunOptions, Scripted, SimConfig, StaticScene,
+    VecEnv, run_episodes,
+};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
-/// The scripted policies.
-#[derive(Debug, Clone, Copy, clap::ValueEnum)]
-pub enum PolicyKind {
-    /// Uniformly random actions (seeded).
-    Random,
-    /// Always straight ahead at 0.5 m/s (action 1).
-    Forward,
-    /// A reactive wanderer on the laser and the depth camera: heads for the most open way.
-    Wander,
-    /// The same wanderer with the laser only: blind to low boxes and overhangs.
-    WanderLaser,
+/// Parses a scripted policy's name (`--policy`).
+pub fn parse_scripted(s: &str) -> Result<Scripted, String> {
+    s.parse()
 }
 
-/// Builds a scripted policy for `env`.
-pub fn make_policy(kind: PolicyKind, env: &Env, seed: u64) -> Box<dyn Policy> {
-    match kind {
-        PolicyKind::Random => Box::new(RandomPolicy::new(seed)),
-        PolicyKind::Forward => {
-            Box::new(ConstantPolicy(Action::new(1).unwrap_or_else(|| unreachable!())))
-        }
-        PolicyKind::Wander => Box::new(WanderPolicy::with_depth(
-            env.laser().angles(),
-            env.depth_camera().geometry(),
-            env.config().robot.body_height_m,
-        )),
-        PolicyKind::WanderLaser => Box::new(WanderPolicy::new(env.laser().angles())),
-    }
+/// One environment for episodes run one after another (`rollout`, `demo`).
+pub fn single_env(world: mdrlat_world::World, sim: &SimConfig) -> Result<VecEnv> {
+    let scene = Arc::new(StaticScene::new(Arc::new(world), sim));
+    Ok(VecEnv::new(scene, sim.clone(), 1, 1)?)
 }
 
 /// Arguments of `mdrlat rollout`.
@@ -56,9 +43,9 @@ pub struct Args {
     /// Consecutive episodes (the random streams continue from one to the next).
     #[arg(long, default_value_t = 1)]
     episodes: u32,
-    /// Who drives.
-    #[arg(long, value_enum, default_value = "random")]
-    policy: PolicyKind,
+    /// Who drives: random, forward, wander or wander-laser.
+    #[arg(long, default_value = "random", value_parser = parse_scripted)]
+    policy: Scripted,
     /// Start pose X,Y,YAW_DEG of the first episode (default: a seeded random free pose).
     #[arg(long, allow_hyphen_values = true)]
     pose: Option<String>,
@@ -73,13 +60,19 @@ pub struct Args {
     config: Option<PathBuf>,
 }
 
-/// Writes episodes as CSV rows and, optionally, GIF frames: shared by `rollout` and `demo`.
+/// Writes episodes as CSV rows and, optionally, GIF frames, as an episode-runner
+/// [`Observer`]: shared by `rollout` and `demo`.
 pub struct Recorder {
     csv: std::io::BufWriter<std::fs::File>,
     gif: Option<(PathBuf, Option<GifWriter<std::io::BufWriter<std::fs::File>>>)>,
     scale: f32,
     /// The last frame drawn (with a GIF).
     pub last_frame: Option<Image>,
+    trail: Vec<Vec2>,
+    sum: f32,
+    /// Captions name the episode.
+    label_episodes: bool,
+    bar: Option<ProgressBar>,
 }
 
 impl Recorder {
@@ -93,7 +86,16 @@ impl Recorder {
         if let Some(g) = gif {
             ensure_parent(g)?;
         }
-        Ok(Self { csv, gif: gif.map(|g| (g.to_path_buf(), None)), scale, last_frame: None })
+        Ok(Self {
+            csv,
+            gif: gif.map(|g| (g.to_path_buf(), None)),
+            scale,
+            last_frame: None,
+            trail: Vec::new(),
+            sum: 0.0,
+            label_episodes: false,
+            bar: None,
+        })
     }
 
     /// Adds a frame of the environment's current state to the GIF (if any).
@@ -116,36 +118,24 @@ impl Recorder {
         Ok(())
     }
 
-    /// Runs one episode of `policy`, recording every step; `tick` is called once per step.
-    pub fn episode(
+    /// Runs `specs` with `policy` in the single environment of `venv`, recording every
+    /// step; the bar (if any) advances once per step.
+    pub fn run(
         &mut self,
-        env: &mut Env,
-        policy: &mut dyn Policy,
-        (seed, pose): (Option<u64>, Option<Pose2>),
+        venv: &mut VecEnv,
+        policy: &mut dyn mdrlat_sim::Policy,
+        specs: &[EpisodeSpec],
         steps: u32,
-        label: &str,
-        mut tick: impl FnMut(),
-    ) -> Result<Vec<TrajectoryRow>> {
-        let mut trail: Vec<Vec2> = Vec::new();
-        let mut sum = 0.0f32;
-        run_episode(env, policy, seed, pose, steps, |env, row| -> Result<()> {
-            writeln!(self.csv, "{}", row.to_csv())?;
-            sum += row.reward;
-            trail.push(row.info.pose.position());
-            let i = &row.info;
-            let caption = format!(
-                "{}  {label}step {}  v {:.2} w {:+.2}  r {:+.2}  sum {:+.1}",
-                env.world().name,
-                i.step,
-                i.velocity.v,
-                i.velocity.w,
-                row.reward,
-                sum
-            );
-            self.frame(env, &trail, &caption, row.terminated)?;
-            tick();
-            Ok(())
-        })
+        bar: Option<ProgressBar>,
+    ) -> Result<Vec<EpisodeOutcome>> {
+        self.label_episodes = specs.len() > 1;
+        self.bar = bar;
+        let options = RunOptions { max_steps: steps, record_rows: true };
+        let outcomes = run_episodes(venv, policy, specs, &options, self)?;
+        if let Some(bar) = self.bar.take() {
+            bar.finish_and_clear();
+        }
+        Ok(outcomes)
     }
 
     /// Flushes the CSV and closes the GIF.
@@ -158,36 +148,65 @@ impl Recorder {
     }
 }
 
+impl Observer for Recorder {
+    fn wants_steps(&self) -> bool {
+        true
+    }
+
+    fn on_step(
+        &mut self,
+        episode: usize,
+        env: &Env,
+        row: &TrajectoryRow,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        writeln!(self.csv, "{}", row.to_csv())?;
+        self.sum += row.reward;
+        self.trail.push(row.info.pose.position());
+        let i = &row.info;
+        let label = if self.label_episodes { format!("ep {episode}  ") } else { String::new() };
+        let caption = format!(
+            "{}  {label}step {}  v {:.2} w {:+.2}  r {:+.2}  sum {:+.1}",
+            env.world().name,
+            i.step,
+            i.velocity.v,
+            i.velocity.w,
+            row.reward,
+            self.sum
+        );
+        let trail = std::mem::take(&mut self.trail);
+        let drawn = self.frame(env, &trail, &caption, row.terminated);
+        self.trail = trail;
+        drawn?;
+        if let Some(bar) = &self.bar {
+            bar.inc(1);
+        }
+        Ok(())
+    }
+
+    fn on_episode(&mut self, _episode: usize, _outcome: &EpisodeOutcome) {
+        self.trail.clear();
+        self.sum = 0.0;
+    }
+}
+
 /// Runs `mdrlat rollout`.
 pub fn run(a: &Args) -> Result<()> {
     let config = Config::load_or_default(a.config.as_deref())?;
     let world = load_world(&a.world)?;
-    let mut env = make_env(world, &config.sim)?;
-    let mut policy = make_policy(a.policy, &env, a.seed);
-    let scale = px_per_m(env.world(), 480.0);
+    let scale = px_per_m(&world, 480.0);
+    let mut venv = single_env(world, &config.sim)?;
+    let mut policy = a.policy.build(&config.sim, a.seed);
     let mut rec = Recorder::create(&a.out, a.gif.as_deref(), scale)?;
+    let first =
+        EpisodeSpec { seed: Some(a.seed), pose: a.pose.as_deref().map(parse_pose).transpose()? };
+    let specs: Vec<EpisodeSpec> =
+        (0..a.episodes).map(|k| if k == 0 { first } else { EpisodeSpec::default() }).collect();
     let pb = progress::bar(u64::from(a.steps) * u64::from(a.episodes), "rollout");
-    let (mut total_steps, mut collisions, mut total_reward) = (0usize, 0u32, 0.0f64);
-    for episode in 0..a.episodes {
-        let start = if episode == 0 {
-            (Some(a.seed), a.pose.as_deref().map(parse_pose).transpose()?)
-        } else {
-            (None, None)
-        };
-        let rows = rec.episode(
-            &mut env,
-            policy.as_mut(),
-            start,
-            a.steps,
-            &format!("ep {episode}  "),
-            || pb.inc(1),
-        )?;
-        total_steps += rows.len();
-        collisions += u32::from(rows.last().is_some_and(|r| r.terminated));
-        total_reward += rows.iter().map(|r| f64::from(r.reward)).sum::<f64>();
-    }
-    pb.finish_and_clear();
+    let outcomes = rec.run(&mut venv, policy.as_mut(), &specs, a.steps, Some(pb))?;
     rec.finish()?;
+    let total_steps: u64 = outcomes.iter().map(|o| u64::from(o.steps)).sum();
+    let collisions = outcomes.iter().filter(|o| !o.success()).count();
+    let total_reward: f64 = outcomes.iter().map(|o| f64::from(o.reward)).sum();
     out!(
         "{} episode(s), {} steps, {} collision(s), mean episode reward {:.2}; wrote {}{}",
         a.episodes,

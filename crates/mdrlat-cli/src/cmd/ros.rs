@@ -5,7 +5,7 @@ use super::train::DeviceKind;
 use super::{ensure_parent, load_world, make_env, px_per_m, snapshot};
 use crate::config::Config;
 use anyhow::{Context, Result, bail};
-use mdrlat_core::{Action, DEPTH_COLS, DEPTH_ROWS, LASER_BEAMS, Velocity, laser_beam_angle};
+use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, LASER_BEAMS, Velocity, laser_beam_angle};
 use mdrlat_geom::Vec2;
 use mdrlat_nn::Variant;
 use mdrlat_ros::msg::{Header, Image, LaserScan, Odometry, Quaternion, Time, Twist, Vector3};
@@ -148,22 +148,6 @@ pub fn stop_flag() -> Result<Arc<AtomicBool>> {
     Ok(stop)
 }
 
-/// The deployed policy behind the node's [`mdrlat_ros::Policy`] trait.
-pub struct Deployed(pub GreedyPolicy);
-
-impl mdrlat_ros::Policy for Deployed {
-    fn uses_laser(&self) -> bool {
-        self.0.variant().uses_laser()
-    }
-    fn uses_depth(&self) -> bool {
-        self.0.variant().uses_depth()
-    }
-    fn decide(&mut self, laser: &[f32], depth: &[f32]) -> Result<Action, String> {
-        let a = self.0.act(laser, depth)?;
-        Action::new(a).ok_or_else(|| format!("the network chose action {a} (Table 1 has 10)"))
-    }
-}
-
 fn log_line(line: &str) {
     let t = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -241,7 +225,7 @@ pub fn run(a: &Args) -> Result<()> {
         a.threads
     ));
     let stop = stop_flag()?;
-    let summary = mdrlat_ros::run(&config, Box::new(Deployed(policy)), &stop, &log_line)?;
+    let summary = mdrlat_ros::run(&config, Box::new(policy), &stop, &log_line)?;
     log_line(&format!("exited after {:.1} s", summary.seconds));
     Ok(())
 }

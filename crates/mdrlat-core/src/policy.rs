@@ -1,0 +1,152 @@
+//! The one policy interface: a batch of observations in, one action per observation out.
+//!
+//! Everything that drives the robot implements [`Policy`]: the scripted baselines of the
+//! simulator, a trained Q-network (batched: one forward for every environment of a
+//! `VecEnv`), and whatever the ROS node deploys. Training's evaluation, `rollout`, `eval`,
+//! the ROS node and the tests all call it, so acting has one definition — including the one
+//! rule for Q-values that are not finite ([`greedy_actions`]).
+
+use crate::action::Action;
+use crate::obs::Observation;
+use std::fmt;
+
+/// The sensors a policy reads (a deployment checks that it receives them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sensors {
+    /// It reads the 2D laser.
+    pub laser: bool,
+    /// It reads the depth camera.
+    pub depth: bool,
+}
+
+impl Sensors {
+    /// Both sensors.
+    pub const BOTH: Sensors = Sensors { laser: true, depth: true };
+    /// Neither (a policy that ignores its observations).
+    pub const NONE: Sensors = Sensors { laser: false, depth: false };
+}
+
+/// Why a policy could not decide.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum PolicyError {
+    /// Observation `row` of the batch got a non-finite Q-value: acting on it would be a guess.
+    NonFinite {
+        /// Row of the batch.
+        row: usize,
+        /// Its Q-values.
+        values: Vec<f32>,
+    },
+    /// The policy produced `got` actions for `expected` observations.
+    Count {
+        /// Observations in the batch.
+        expected: usize,
+        /// Actions or Q-value rows produced.
+        got: usize,
+    },
+    /// The computation itself failed (a backend error, an input of the wrong size, a panic).
+    Backend(String),
+}
+
+impl fmt::Display for PolicyError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            PolicyError::NonFinite { row, values } => {
+                write!(f, "non-finite Q-values for observation {row} of the batch: {values:?}")
+            }
+            PolicyError::Count { expected, got } => {
+                write!(f, "the policy decided {got} actions for {expected} observations")
+            }
+            PolicyError::Backend(e) => f.write_str(e),
+        }
+    }
+}
+
+impl std::error::Error for PolicyError {}
+
+/// Anything that picks actions from observations.
+///
+/// A caller stepping several environments at once gives each its *slot* (0, 1, …) and
+/// passes the observations of the slots that are running, in any subset and order, with
+/// their slot numbers. A policy with state (the random policy's stream) keys it by slot and
+/// restarts it in [`Policy::begin_episode`], so an episode's actions depend on that
+/// episode alone, never on which other episodes ran beside it.
+pub trait Policy: Send {
+    /// A short name for logs and reports, e.g. `wander` or `mdrlat (runs/a, step 400000)`.
+    fn name(&self) -> String;
+
+    /// The sensors it reads.
+    fn sensors(&self) -> Sensors;
+
+    /// Slot `slot` starts an episode. With `Some(seed)` a stateful policy restarts its
+    /// randomness from that episode seed; with `None` it continues it.
+    fn begin_episode(&mut self, slot: usize, seed: Option<u64>) {
+        let _ = (slot, seed);
+    }
+
+    /// One action per observation of `batch` (oldest frame first, metres, as
+    /// [`Observation`] holds them) into `out`, which is cleared first; `slots[i]` is the
+    /// slot of `batch[i]`.
+    ///
+    /// # Errors
+    /// The policy cannot decide (see [`PolicyError`]); the caller must not guess an action.
+    fn act(
+        &mut self,
+        batch: &[&Observation],
+        slots: &[usize],
+        out: &mut Vec<Action>,
+    ) -> Result<(), PolicyError>;
+}
+
+/// The greedy action of each row of `q` (`rows` × [`Action::COUNT`], row-major) into `out`
+/// (cleared first): the first maximum on ties.
+///
+/// # Errors
+/// [`PolicyError::NonFinite`] for a row with a NaN or infinite value (no action is taken
+/// from a network that has diverged or read garbage); [`PolicyError::Count`] if `q` does
+/// not hold `rows` rows.
+pub fn greedy_actions(q: &[f32], rows: usize, out: &mut Vec<Action>) -> Result<(), PolicyError> {
+    out.clear();
+    if q.len() != rows * Action::COUNT {
+        return Err(PolicyError::Count { expected: rows, got: q.len() / Action::COUNT });
+    }
+    for (row, values) in q.chunks_exact(Action::COUNT).enumerate() {
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err(PolicyError::NonFinite { row, values: values.to_vec() });
+        }
+        let best = values
+            .iter()
+            .enumerate()
+            .fold((0, f32::NEG_INFINITY), |b, (i, &v)| if v > b.1 { (i, v) } else { b })
+            .0;
+        out.push(Action::new(best).unwrap_or_else(|| unreachable!("row of Action::COUNT")));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn greedy_actions_take_the_first_maximum_and_refuse_non_finite_rows() {
+        let mut q = vec![0.0f32; 2 * Action::COUNT];
+        q[3] = 2.0;
+        q[7] = 2.0;
+        q[Action::COUNT + 9] = -0.5;
+        for v in &mut q[Action::COUNT..Action::COUNT + 9] {
+            *v = -1.0;
+        }
+        let mut out = Vec::new();
+        greedy_actions(&q, 2, &mut out).expect("finite");
+        assert_eq!(out.iter().map(|a| a.index()).collect::<Vec<_>>(), [3, 9]);
+        q[Action::COUNT + 2] = f32::NAN;
+        let e = greedy_actions(&q, 2, &mut out).expect_err("NaN");
+        assert!(matches!(e, PolicyError::NonFinite { row: 1, .. }), "{e:?}");
+        assert!(e.to_string().contains("observation 1"), "{e}");
+        q[Action::COUNT + 2] = f32::INFINITY;
+        assert!(greedy_actions(&q, 2, &mut out).is_err());
+        let e = greedy_actions(&q[..Action::COUNT], 2, &mut out).expect_err("short");
+        assert_eq!(e, PolicyError::Count { expected: 2, got: 1 });
+    }
+}

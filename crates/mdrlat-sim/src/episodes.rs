@@ -1,0 +1,245 @@
+//! The one episode runner: a list of episodes, a [`VecEnv`] and a [`Policy`] in, one
+//! outcome per episode out.
+//!
+//! As Stable-Baselines3's `evaluate_policy`, episodes are dealt to the vector's
+//! environments ("slots"): each slot runs an episode, and when it ends takes the next one
+//! not yet started; every step, one batched call of the policy decides for all running
+//! slots. An episode's start comes from its own seed, the policy restarts any randomness
+//! from that seed too ([`Policy::begin_episode`]), and results are returned in the order of
+//! the list — so an episode's outcome never depends on how many slots there are or which
+//! episodes ran beside it (for a policy whose decision for one observation does not depend
+//! on the rest of the batch). Training's evaluation (Fig. 4), `mdrlat rollout`,
+//! `mdrlat eval` and the tests all run episodes through [`run_episodes`].
+
+use crate::env::{Collision, Env, Observation, SimError};
+use crate::rollout::TrajectoryRow;
+use crate::vec_env::VecEnv;
+use mdrlat_core::{Action, Policy, PolicyError};
+use mdrlat_geom::Pose2;
+
+/// One episode to run.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EpisodeSpec {
+    /// Its seed: `Some` reseeds the environment (start pose, pedestrians, noise: stream 0 of
+    /// the seed, as `Env::reset(Some(seed))`) and the policy's randomness; `None` continues
+    /// the streams of the slot's previous episode.
+    pub seed: Option<u64>,
+    /// A fixed start pose (`None`: drawn from the spawn regions).
+    pub pose: Option<Pose2>,
+}
+
+/// What happened in one episode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeOutcome {
+    /// The start pose.
+    pub start: Pose2,
+    /// Steps taken.
+    pub steps: u32,
+    /// Accumulated reward (paper eq. 3), summed in `f32` step by step.
+    pub reward: f32,
+    /// The collision that ended it, if one did.
+    pub collision: Option<Collision>,
+    /// The environment's time limit ended it (`max_episode_steps`).
+    pub truncated: bool,
+    /// Distance driven, metres (sum of the straight distances between step poses).
+    pub path_m: f32,
+    /// Every action taken, in order: with the episode's seed they reproduce it exactly
+    /// ([`crate::ReplayPolicy`]).
+    pub actions: Vec<Action>,
+    /// Every step, when [`RunOptions::record_rows`] asked for them.
+    pub rows: Vec<TrajectoryRow>,
+}
+
+impl EpisodeOutcome {
+    /// No collision happened (within the steps it ran).
+    pub fn success(&self) -> bool {
+        self.collision.is_none()
+    }
+}
+
+/// How episodes run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunOptions {
+    /// An episode stops after this many steps even if the environment's time limit is
+    /// later (the evaluation protocol's 300).
+    pub max_steps: u32,
+    /// Keep every step's row in [`EpisodeOutcome::rows`].
+    pub record_rows: bool,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        Self { max_steps: u32::MAX, record_rows: false }
+    }
+}
+
+/// Why running episodes stopped.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// The simulator failed (e.g. no free start pose).
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    /// The policy could not decide (episode and slot named).
+    #[error("policy '{policy}' in episode {episode}: {source}")]
+    Policy {
+        /// The policy's name.
+        policy: String,
+        /// An episode of the batch that failed (the first, in slot order).
+        episode: usize,
+        /// What went wrong.
+        source: PolicyError,
+    },
+    /// The observer failed (e.g. a file could not be written).
+    #[error("{0}")]
+    Observer(Box<dyn std::error::Error + Send + Sync>),
+}
+
+/// Watches episodes as they run: progress bars, CSV rows, animation frames.
+pub trait Observer {
+    /// Whether [`Observer::on_step`] should be called (it costs a lock per step).
+    fn wants_steps(&self) -> bool {
+        false
+    }
+    /// After every step of episode `episode` (index in the list), with its environment.
+    ///
+    /// # Errors
+    /// Any; running stops with [`RunError::Observer`].
+    fn on_step(
+        &mut self,
+        episode: usize,
+        env: &Env,
+        row: &TrajectoryRow,
+    ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+        let _ = (episode, env, row);
+        Ok(())
+    }
+    /// When episode `episode` has ended.
+    fn on_episode(&mut self, episode: usize, outcome: &EpisodeOutcome) {
+        let _ = (episode, outcome);
+    }
+}
+
+/// An observer that watches nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Quiet;
+
+impl Observer for Quiet {}
+
+/// A slot's running episode.
+#[derive(Debug)]
+struct Running {
+    episode: usize,
+    outcome: EpisodeOutcome,
+    /// Pose after the last step (the start before the first), for the path length.
+    last: Pose2,
+    /// Path length in `f64`, stored rounded into the outcome at the end.
+    path_m: f64,
+}
+
+/// Runs every episode of `specs` with `policy` on the environments of `venv` (all of them
+/// slots; fewer episodes than slots leave the rest idle) and returns their outcomes in the
+/// order of `specs`. The vector is left without auto-reset.
+///
+/// # Errors
+/// A reset that found no free pose, a policy that could not decide, or a failing observer.
+pub fn run_episodes(
+    venv: &mut VecEnv,
+    policy: &mut dyn Policy,
+    specs: &[EpisodeSpec],
+    options: &RunOptions,
+    observer: &mut dyn Observer,
+) -> Result<Vec<EpisodeOutcome>, RunError> {
+    venv.set_auto_reset(false);
+    let slots = venv.len();
+    let mut done: Vec<Option<EpisodeOutcome>> = (0..specs.len()).map(|_| None).collect();
+    let mut running: Vec<Option<Running>> = (0..slots).map(|_| None).collect();
+    let mut next = 0usize;
+    let start = |venv: &mut VecEnv,
+                 policy: &mut dyn Policy,
+                 slot: usize,
+                 next: &mut usize|
+     -> Result<Option<Running>, RunError> {
+        let Some(spec) = specs.get(*next) else { return Ok(None) };
+        venv.reset_env(slot, spec.seed, spec.pose)?;
+        policy.begin_episode(slot, spec.seed);
+        let pose = venv.env(slot).pose();
+        let outcome = EpisodeOutcome {
+            start: pose,
+            steps: 0,
+            reward: 0.0,
+            collision: None,
+            truncated: false,
+            path_m: 0.0,
+            actions: Vec::new(),
+            rows: Vec::new(),
+        };
+        *next += 1;
+        Ok(Some(Running { episode: *next - 1, outcome, last: pose, path_m: 0.0 }))
+    };
+    for (slot, r) in running.iter_mut().enumerate() {
+        *r = start(venv, policy, slot, &mut next)?;
+    }
+    let (mut active, mut actions, mut masked) = (Vec::new(), Vec::new(), vec![None; slots]);
+    loop {
+        active.clear();
+        active.extend(running.iter().enumerate().filter(|(_, r)| r.is_some()).map(|(i, _)| i));
+        if active.is_empty() {
+            break;
+        }
+        let decided = venv.with_observations(|obs| {
+            let batch: Vec<&Observation> = active.iter().map(|&i| obs[i]).collect();
+            policy.act(&batch, &active, &mut actions)
+        });
+        let first_episode = running[active[0]].as_ref().map_or(0, |r| r.episode);
+        let policy_error =
+            |source| RunError::Policy { policy: policy.name(), episode: first_episode, source };
+        decided.map_err(policy_error)?;
+        if actions.len() != active.len() {
+            return Err(policy_error(PolicyError::Count {
+                expected: active.len(),
+                got: actions.len(),
+            }));
+        }
+        masked.iter_mut().for_each(|m| *m = None);
+        for (&slot, &a) in active.iter().zip(&actions) {
+            masked[slot] = Some(a);
+        }
+        let stepped = venv.step_masked(&masked)?.to_vec();
+        for (&slot, &action) in active.iter().zip(&actions) {
+            let Some(s) = stepped[slot] else { continue };
+            let Some(r) = running[slot].as_mut() else { continue };
+            r.path_m += f64::from((s.info.pose.position() - r.last.position()).length());
+            r.last = s.info.pose;
+            let o = &mut r.outcome;
+            o.path_m = r.path_m as f32;
+            let row = TrajectoryRow {
+                action,
+                reward: s.reward,
+                terminated: s.terminated,
+                truncated: s.truncated,
+                info: s.info,
+            };
+            o.steps += 1;
+            o.reward += s.reward;
+            o.actions.push(action);
+            o.collision = s.info.collision;
+            o.truncated = s.truncated;
+            if options.record_rows {
+                o.rows.push(row);
+            }
+            if observer.wants_steps() {
+                let env = venv.env(slot);
+                observer.on_step(r.episode, &env, &row).map_err(RunError::Observer)?;
+            }
+            if s.terminated || s.truncated || o.steps >= options.max_steps {
+                if let Some(finished) = running[slot].take() {
+                    observer.on_episode(finished.episode, &finished.outcome);
+                    done[finished.episode] = Some(finished.outcome);
+                }
+                running[slot] = start(venv, policy, slot, &mut next)?;
+            }
+        }
+    }
+    Ok(done.into_iter().map(|o| o.unwrap_or_else(|| unreachable!("every episode ran"))).collect())
+}
