@@ -66,6 +66,39 @@ impl QNetConfig {
         h
     }
 
+    /// Floating-point operations of one forward pass for one observation (2 per
+    /// multiply-add of every convolution and linear layer, plus the bilinear outer product):
+    /// ~30.8 M for MDRLAT. The yardstick of the learner's and the evaluation's speed.
+    pub fn forward_flops(&self) -> u64 {
+        let v = self.variant;
+        let (r, c) = (self.depth_rows, self.depth_cols);
+        let mut macs = 0usize;
+        if v.uses_depth() {
+            let (r1, c1) = (same(r, 8), same(c, 8));
+            let (r2, c2) = (same(r1, 2), same(c1, 2));
+            macs += 16 * r1 * c1 * self.frames * 10 * 14;
+            macs += 32 * r2 * c2 * 16 * 4 * 4;
+            macs += 32 * r2 * c2 * 32 * 3 * 3;
+        }
+        if v.uses_laser() {
+            let b1 = same(self.beams, 4);
+            let (b2, b3) = (same(b1, 2), same(same(b1, 2), 2));
+            macs += 16 * b1 * self.frames * 5 + 32 * b2 * 16 * 3 + 32 * b3 * 32 * 3;
+        }
+        if v.bilinear_fusion() {
+            macs += self.depth_features() * FUSION_DEPTH
+                + self.laser_features() * FUSION_LASER
+                + FUSION_DEPTH * FUSION_LASER * (1 + FUSION_OUT);
+        }
+        let h = self.representation();
+        let heads = if v.auxiliary_task() { 3 } else { 2 };
+        macs += heads * h * HIDDEN + HIDDEN * (1 + self.actions);
+        if v.auxiliary_task() {
+            macs += HIDDEN * VELOCITY_OUT;
+        }
+        2 * macs as u64
+    }
+
     /// Builds the network on `device` with weights drawn from `seed` (the same on every
     /// backend and in every thread; see the `init` module).
     pub fn init_seeded(&self, device: &Device, seed: u64) -> QNet {

@@ -9,6 +9,22 @@ fn device() -> Device {
 }
 
 #[test]
+fn forward_flops_count_every_layer() {
+    // MDRLAT by hand (multiply-adds): depth convs 2,867,200 + 655,360 + 737,280; laser convs
+    // 40,960 + 98,304 + 98,304; fusion 327,680 + 65,536 + 8,192 x 513; heads 3 x 4096 x 512
+    // + 512 x 11 + 512 x 6 = 15,393,280, i.e. 30.8 MFLOP (the issue's figure).
+    assert_eq!(QNetConfig::new(Variant::Mdrlat).forward_flops(), 2 * 15_393_280);
+    // Laser-only: the laser convs and two heads on h = 1024.
+    assert_eq!(
+        QNetConfig::new(Variant::LaserOnly).forward_flops(),
+        2 * (237_568 + 2 * 1024 * 512 + 512 * 11)
+    );
+    let f = |v| QNetConfig::new(v).forward_flops();
+    assert!(f(Variant::Multi) < f(Variant::MultiAt) && f(Variant::MultiAt) < f(Variant::Mdrlat));
+    assert!(f(Variant::Multi) < f(Variant::MultiBf) && f(Variant::MultiBf) < f(Variant::Mdrlat));
+}
+
+#[test]
 fn parameter_counts_match_the_paper_architecture() {
     // MDRLAT, laser-only and multi from the issue; the others computed by hand:
     // depth-only = 26,448 (convs) + 1,311,745 (V) + 1,316,362 (A);

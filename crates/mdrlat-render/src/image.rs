@@ -103,6 +103,22 @@ impl Image {
     }
 }
 
+impl Image {
+    /// The `width × height` region with its top-left corner at `(x, y)`, clipped to the
+    /// picture (a region outside it gives a 0×0 picture).
+    pub fn crop(&self, x: u32, y: u32, width: u32, height: u32) -> Image {
+        let w = width.min(self.width.saturating_sub(x));
+        let h = height.min(self.height.saturating_sub(y));
+        let mut out = Image::new(w, h, PAPER);
+        for r in 0..h as usize {
+            let s = ((y as usize + r) * self.width as usize + x as usize) * 4;
+            let d = r * w as usize * 4;
+            out.rgba[d..d + w as usize * 4].copy_from_slice(&self.rgba[s..s + w as usize * 4]);
+        }
+        out
+    }
+}
+
 /// Copies `src` into `dst` with its top-left corner at `(x, y)`, clipping at the borders.
 fn blit(dst: &mut Image, src: &Image, x: u32, y: u32) {
     if x >= dst.width || y >= dst.height {
@@ -135,6 +151,21 @@ pub fn side_by_side(images: &[&Image], gap: u32) -> Image {
     out
 }
 
+/// Puts pictures below each other, top to bottom, left-aligned, `gap` pixels apart;
+/// narrower ones are padded with white on the right. An empty list gives a 0×0 picture.
+pub fn stacked(images: &[&Image], gap: u32) -> Image {
+    let width = images.iter().map(|i| i.width).max().unwrap_or(0);
+    let height = images.iter().map(|i| i.height).sum::<u32>()
+        + gap * (images.len().saturating_sub(1) as u32);
+    let mut out = Image::new(width, height, PAPER);
+    let mut y = 0;
+    for img in images {
+        blit(&mut out, img, 0, y);
+        y += img.height + gap;
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -152,6 +183,15 @@ mod tests {
         assert_eq!(c.pixel(5, 0), None);
         let e = side_by_side(&[], 3);
         assert_eq!((e.width, e.height, e.rgba.len()), (0, 0, 0));
+        let v = stacked(&[&a, &b], 1);
+        assert_eq!((v.width, v.height), (2, 5));
+        assert_eq!(v.pixel(0, 4), Some([0, 0, 255, 255]));
+        assert_eq!(v.pixel(1, 4), Some(PAPER));
+        assert_eq!(v.pixel(0, 3), Some(PAPER));
+        let c = v.crop(1, 2, 5, 5);
+        assert_eq!((c.width, c.height), (1, 3));
+        assert_eq!(c.pixel(0, 0), Some([255, 0, 0, 255]));
+        assert_eq!(v.crop(9, 0, 2, 2).rgba.len(), 0);
         let r = a.resized_canvas(1, 4, PAPER);
         assert_eq!(r.pixel(0, 2), Some([255, 0, 0, 255]));
         assert_eq!(r.pixel(0, 3), Some(PAPER));

@@ -309,3 +309,39 @@ fn observations_normalise_through_the_shared_core_function() {
     assert!(depth.iter().all(|x| (0.0..=2.0).contains(x)));
     assert_eq!(laser[3 * 512 + 7], obs.laser.latest()[7] / 5.6);
 }
+
+/// Steps of standing still in which no seeded start may collide (the default 1 s horizon of
+/// `spawn_pedestrian_horizon_s`).
+const STAND_STILL_STEPS: u32 = 5;
+
+/// Seeds of `world` (of the first `seeds`) whose start collides while the robot stands still.
+fn lost_starts(world: &World, config: &SimConfig, seeds: u64) -> Vec<(u64, u32)> {
+    let mut env = Env::from_world(world.clone(), config.clone()).expect("env");
+    let mut lost = Vec::new();
+    for seed in 0..seeds {
+        env.reset(Some(seed)).expect("reset");
+        for k in 1..=STAND_STILL_STEPS {
+            let s = env.step_command(mdrlat_core::Velocity::default()).expect("step");
+            if s.terminated {
+                lost.push((seed, k));
+                break;
+            }
+        }
+    }
+    lost
+}
+
+#[test]
+fn issue_10_no_seeded_start_collides_before_the_policy_can_act() {
+    let config = SimConfig::default();
+    for name in mdrlat_world::builtin::NAMES {
+        let world = mdrlat_world::builtin::get(name).expect("builtin").expect("valid");
+        let lost = lost_starts(&world, &config, 400);
+        assert!(lost.is_empty(), "{name}: starts lost while standing still (seed, step): {lost:?}");
+    }
+    // The control: with the pedestrians' paths ignored (only their positions at the reset,
+    // as before issue 10), some `crowd` starts are lost — the test can fail.
+    let crowd = mdrlat_world::builtin::get("crowd").expect("builtin").expect("valid");
+    let blind = SimConfig { spawn_pedestrian_horizon_s: 0.0, ..SimConfig::default() };
+    assert!(!lost_starts(&crowd, &blind, 400).is_empty(), "the control lost no start");
+}

@@ -1,0 +1,212 @@
+//! `mdrlat eval`: the paper's success-rate protocol (Table 2) for a trained run or a
+//! scripted baseline, in any worlds, with Figs. 6/7 on request.
+
+use super::rollout::parse_scripted;
+use super::train::DeviceKind;
+use super::{ensure_dir, load_world};
+use crate::config::Config;
+use crate::progress;
+use anyhow::{Context, Result, bail};
+use mdrlat_core::Policy;
+use mdrlat_eval::{
+    EvalSettings, Timing, WorldEval, WorldSummary, draw_episode, episodes_csv, eval_sim_config,
+    evaluate_world, pick_episodes, summary_csv, summary_markdown,
+};
+use mdrlat_nn::QNetConfig;
+use mdrlat_sim::Scripted;
+use mdrlat_train::GreedyPolicy;
+use std::path::{Path, PathBuf};
+
+/// The paper's three unseen test worlds (Fig. 5).
+const TEST_WORLDS: [&str; 3] = ["office", "furnished", "crowd"];
+
+/// Arguments of `mdrlat eval`.
+#[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("who").required(true).args(["checkpoint", "policy"])))]
+pub struct Args {
+    /// A run directory of `mdrlat train` (or its checkpoint folder): its network acts greedily.
+    #[arg(long, value_name = "RUN_DIR", conflicts_with = "policy")]
+    checkpoint: Option<PathBuf>,
+    /// A scripted policy instead: random, forward, wander or wander-laser (`wander` is the
+    /// non-learned baseline row beside the six methods).
+    #[arg(long, value_parser = parse_scripted)]
+    policy: Option<Scripted>,
+    /// World to evaluate in (repeatable): a built-in name, a .toml world file or a
+    /// map_server .yaml (default: the paper's test worlds office, furnished and crowd).
+    #[arg(long = "world", value_name = "W")]
+    worlds: Vec<String>,
+    /// Episodes per run (the paper's 50).
+    #[arg(long, default_value_t = 50)]
+    episodes: u32,
+    /// Runs per world, each from other start poses (the paper's 5): mean ± std over runs.
+    #[arg(long, default_value_t = 5)]
+    runs: u32,
+    /// Steps an episode must survive without a collision to succeed (the paper's 300).
+    #[arg(long, default_value_t = 300)]
+    max_steps: u32,
+    /// Seed of the start poses: the same seed gives every method the same starts.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Output directory: episodes.csv, summary.csv, summary.md (and figures/).
+    #[arg(long)]
+    out: PathBuf,
+    /// Also print one JSON object per world on stdout (results and timing).
+    #[arg(long)]
+    json: bool,
+    /// Draw Figs. 6/7 for this many episodes (the longest successes and the dead ends).
+    #[arg(long, default_value_t = 0, value_name = "K")]
+    figures: usize,
+    /// Environments stepped together; the network decides for all of them in one batch.
+    /// Keep it fixed to compare runs byte for byte (a batched forward may round differently).
+    #[arg(long, default_value_t = 64)]
+    envs: usize,
+    /// CPU threads of the network's inference (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Threads stepping the simulator (default: 1 with a network, which needs the cores;
+    /// all cores for a scripted policy).
+    #[arg(long)]
+    sim_threads: Option<usize>,
+    /// Compute device of the network.
+    #[arg(long, value_enum, default_value = "cpu")]
+    device: DeviceKind,
+    /// Simulator settings (see `mdrlat config default`); the same for every method compared.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Replace the results of an earlier evaluation in --out.
+    #[arg(long)]
+    overwrite: bool,
+}
+
+/// Refuses to mix or silently replace earlier results.
+fn check_out(dir: &Path, overwrite: bool) -> Result<()> {
+    let old = ["episodes.csv", "summary.csv", "summary.md"].iter().any(|f| dir.join(f).exists());
+    if old && !overwrite {
+        bail!(
+            "{} already holds an evaluation: choose another --out, or pass --overwrite",
+            dir.display()
+        );
+    }
+    ensure_dir(dir)
+}
+
+fn write(path: &Path, text: &str) -> Result<()> {
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Runs `mdrlat eval`.
+pub fn run(a: &Args) -> Result<()> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let settings = EvalSettings {
+        episodes: a.episodes,
+        runs: a.runs,
+        max_steps: a.max_steps,
+        seed: a.seed,
+        envs: a.envs,
+        sim_threads: a.sim_threads.unwrap_or(if a.checkpoint.is_some() { 1 } else { 0 }),
+    };
+    settings.validate()?;
+    if a.threads == Some(0) || a.threads.is_some_and(|t| t > 1024) {
+        bail!("--threads {}: must be 1 to 1024", a.threads.unwrap_or_default());
+    }
+    let config = Config::load_or_default(a.config.as_deref())?;
+    let names: Vec<String> = if a.worlds.is_empty() {
+        TEST_WORLDS.iter().map(|s| s.to_string()).collect()
+    } else {
+        a.worlds.clone()
+    };
+    let worlds = names
+        .iter()
+        .map(|w| load_world(w).with_context(|| format!("--world {w}")))
+        .collect::<Result<Vec<_>>>()?;
+    let (mut policy, flop_per_decision): (Box<dyn Policy>, Option<f64>) =
+        match (&a.checkpoint, a.policy) {
+            (Some(run), None) => {
+                let device = a.device.device();
+                let p = GreedyPolicy::load(run, &device, a.threads.unwrap_or(cores))
+                    .map_err(anyhow::Error::msg)
+                    .with_context(|| format!("--checkpoint {}", run.display()))?;
+                let flops = QNetConfig::new(p.variant()).forward_flops() as f64;
+                (Box::new(p), Some(flops))
+            }
+            (None, Some(s)) => (s.build(&config.sim, a.seed), None),
+            _ => bail!("give exactly one of --checkpoint RUN_DIR and --policy NAME"),
+        };
+    check_out(&a.out, a.overwrite)?;
+    let name = policy.name();
+
+    let total = (settings.episodes_per_world() * worlds.len()) as u64;
+    let pb = progress::bar(total, "eval");
+    let mut evals: Vec<WorldEval> = Vec::new();
+    let mut summaries = Vec::new();
+    for world in &worlds {
+        let base = pb.position();
+        let mut on_progress = |p: &mdrlat_eval::Progress<'_>| {
+            pb.set_position(base + p.done as u64);
+            pb.set_message(format!(
+                "{} {:.0}% ok",
+                p.world,
+                100.0 * p.successes as f64 / p.done.max(1) as f64
+            ));
+        };
+        let e = evaluate_world(world, &config.sim, policy.as_mut(), &settings, &mut on_progress)
+            .with_context(|| format!("evaluating {name} in '{}'", world.name))?;
+        let summary = WorldSummary::new(&name, &e, &settings);
+        let timing = Timing::of(&e, flop_per_decision);
+        pb.suspend(|| {
+            if a.json {
+                out!("{}", summary.json(Some(&timing)));
+            } else {
+                let rate = timing
+                    .gflops()
+                    .map(|g| format!(", network at {g:.1} GFLOP/s"))
+                    .unwrap_or_default();
+                out!(
+                    "{:<10} success {:>5.1} ± {:>4.1} %  ({} collisions: {} bumper, {} pedestrian, {} laser)  {:.1} s, {:.0} decisions/s{rate}",
+                    summary.world,
+                    100.0 * summary.success_mean,
+                    100.0 * summary.success_std,
+                    summary.collisions_bumper
+                        + summary.collisions_pedestrian
+                        + summary.collisions_laser,
+                    summary.collisions_bumper,
+                    summary.collisions_pedestrian,
+                    summary.collisions_laser,
+                    timing.wall_s,
+                    timing.decisions_per_s()
+                );
+            }
+        });
+        summaries.push(summary);
+        evals.push(e);
+    }
+    pb.finish_and_clear();
+
+    write(&a.out.join("episodes.csv"), &episodes_csv(&evals))?;
+    write(&a.out.join("summary.csv"), &summary_csv(&summaries))?;
+    write(&a.out.join("summary.md"), &summary_markdown(&summaries))?;
+    let mut written = vec!["episodes.csv", "summary.csv", "summary.md"];
+
+    let dir = a.out.join("figures");
+    if dir.is_dir() {
+        // Pictures of an earlier evaluation (only here with --overwrite) must not mix in.
+        std::fs::remove_dir_all(&dir)
+            .with_context(|| format!("cannot remove the old {}", dir.display()))?;
+    }
+    if a.figures > 0 {
+        ensure_dir(&dir)?;
+        for (w, i, why) in pick_episodes(&evals, a.figures) {
+            let record = &evals[w].records[i];
+            let sim = eval_sim_config(&config.sim, &settings);
+            let fig = draw_episode(&worlds[w], &sim, record, why)?;
+            let stem = format!("{}-run{}-ep{}", record.world, record.run, record.episode);
+            fig.strip.save_png(&dir.join(format!("{stem}.png")))?;
+            fig.trajectory.save_png(&dir.join(format!("{stem}-trajectory.png")))?;
+        }
+        written.push("figures/");
+    }
+    if !a.json {
+        out!("{name}: wrote {} in {}", written.join(", "), a.out.display());
+    }
+    Ok(())
+}

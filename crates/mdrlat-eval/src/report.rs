@@ -1,0 +1,249 @@
+//! What an evaluation writes: `episodes.csv` (one row per episode), `summary.csv` and
+//! `summary.md` (one row per world: success mean ± std over runs, as paper Table 2), and one
+//! JSON object per world. Results only, in fixed precision, in a fixed order — no wall
+//! times or host names — so the same seed gives the same bytes.
+
+use crate::protocol::{EpisodeRecord, EvalSettings, WorldEval, collision_kind};
+use std::fmt::Write as _;
+
+/// The header of `episodes.csv`.
+pub const EPISODES_HEADER: &str =
+    "world,run,episode,seed,x0,y0,yaw0_deg,steps,success,collision,collision_kind,path_m,return";
+
+/// The header of `summary.csv`.
+pub const SUMMARY_HEADER: &str = "eval,world,episodes,runs,max_steps,seed,success_mean,success_std,\
+success_per_run,collisions_bumper,collisions_pedestrian,collisions_laser,steps_mean,path_m_mean,return_mean";
+
+/// One row of `episodes.csv` (no newline).
+pub fn episode_row(r: &EpisodeRecord) -> String {
+    format!(
+        "{},{},{},{},{:.3},{:.3},{:.1},{},{},{},{},{:.3},{:.4}",
+        r.world,
+        r.run,
+        r.episode,
+        r.seed,
+        r.start.x,
+        r.start.y,
+        r.start.yaw.to_degrees(),
+        r.steps,
+        u8::from(r.success()),
+        u8::from(!r.success()),
+        r.collision.as_ref().map_or("", collision_kind),
+        r.path_m,
+        r.ret
+    )
+}
+
+/// A world's results, summarised (paper Table 2's cell and what explains it).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct WorldSummary {
+    /// The evaluated policy's name.
+    pub eval: String,
+    /// The world.
+    pub world: String,
+    /// Episodes per run.
+    pub episodes: u32,
+    /// Runs.
+    pub runs: u32,
+    /// Step budget of an episode.
+    pub max_steps: u32,
+    /// The evaluation's seed.
+    pub seed: u64,
+    /// Mean over runs of each run's success rate (0–1).
+    pub success_mean: f64,
+    /// Population standard deviation over runs of the success rate (as `numpy.std`).
+    pub success_std: f64,
+    /// Each run's success rate.
+    pub success_per_run: Vec<f64>,
+    /// Collisions with static obstacles (the bumper).
+    pub collisions_bumper: u32,
+    /// Collisions with pedestrians.
+    pub collisions_pedestrian: u32,
+    /// Episodes ended by the laser's minimum range (eq. 4).
+    pub collisions_laser: u32,
+    /// Mean steps survived.
+    pub steps_mean: f64,
+    /// Mean distance driven, metres.
+    pub path_m_mean: f64,
+    /// Mean accumulated reward.
+    pub return_mean: f64,
+}
+
+/// Rounds to `digits` decimals, so that the JSON and CSV outputs agree.
+fn round(x: f64, digits: i32) -> f64 {
+    let f = 10f64.powi(digits);
+    (x * f).round() / f
+}
+
+impl WorldSummary {
+    /// Summarises the records of one world.
+    pub fn new(eval: &str, w: &WorldEval, settings: &EvalSettings) -> Self {
+        let runs = settings.runs.max(1);
+        let per_run: Vec<f64> = (0..runs)
+            .map(|run| {
+                let rs: Vec<&EpisodeRecord> = w.records.iter().filter(|r| r.run == run).collect();
+                let ok = rs.iter().filter(|r| r.success()).count();
+                ok as f64 / rs.len().max(1) as f64
+            })
+            .collect();
+        let n = per_run.len() as f64;
+        let mean = per_run.iter().sum::<f64>() / n;
+        let std = (per_run.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let count = |kind: &str| {
+            w.records
+                .iter()
+                .filter(|r| r.collision.as_ref().map(collision_kind) == Some(kind))
+                .count() as u32
+        };
+        let m = w.records.len().max(1) as f64;
+        let avg = |f: fn(&EpisodeRecord) -> f64| w.records.iter().map(f).sum::<f64>() / m;
+        Self {
+            eval: eval.to_string(),
+            world: w.world.clone(),
+            episodes: settings.episodes,
+            runs: settings.runs,
+            max_steps: settings.max_steps,
+            seed: settings.seed,
+            success_mean: round(mean, 6),
+            success_std: round(std, 6),
+            success_per_run: per_run.iter().map(|x| round(*x, 6)).collect(),
+            collisions_bumper: count("bumper"),
+            collisions_pedestrian: count("pedestrian"),
+            collisions_laser: count("laser"),
+            steps_mean: round(avg(|r| f64::from(r.steps)), 3),
+            path_m_mean: round(avg(|r| f64::from(r.path_m)), 3),
+            return_mean: round(avg(|r| f64::from(r.ret)), 4),
+        }
+    }
+
+    /// The row of `summary.csv` (no newline). The eval name is quoted (it may hold commas).
+    pub fn csv_row(&self) -> String {
+        let per_run: Vec<String> = self.success_per_run.iter().map(|x| format!("{x:.6}")).collect();
+        format!(
+            "\"{}\",{},{},{},{},{},{:.6},{:.6},{},{},{},{},{:.3},{:.3},{:.4}",
+            self.eval.replace('"', "'"),
+            self.world,
+            self.episodes,
+            self.runs,
+            self.max_steps,
+            self.seed,
+            self.success_mean,
+            self.success_std,
+            per_run.join(";"),
+            self.collisions_bumper,
+            self.collisions_pedestrian,
+            self.collisions_laser,
+            self.steps_mean,
+            self.path_m_mean,
+            self.return_mean
+        )
+    }
+
+    /// The success rate as the paper prints it: `94.4 ± 2.3` (percent).
+    pub fn success_cell(&self) -> String {
+        format!("{:.1} ± {:.1}", 100.0 * self.success_mean, 100.0 * self.success_std)
+    }
+
+    /// One JSON object (a line of `mdrlat eval --json`), with the run's timing beside the
+    /// results.
+    pub fn json(&self, timing: Option<&Timing>) -> String {
+        let mut v = serde_json::to_value(self).unwrap_or_default();
+        if let (Some(t), Some(map)) = (timing, v.as_object_mut()) {
+            map.insert("wall_s".into(), round(t.wall_s, 3).into());
+            map.insert("policy_s".into(), round(t.policy_s, 3).into());
+            map.insert("decisions".into(), t.decisions.into());
+            map.insert("decisions_per_s".into(), round(t.decisions_per_s(), 1).into());
+            if let Some(g) = t.gflops() {
+                map.insert("policy_gflops".into(), round(g, 2).into());
+            }
+        }
+        v.to_string()
+    }
+}
+
+/// How long a world's evaluation took (stdout only: never in a results file).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Timing {
+    /// Wall time, seconds.
+    pub wall_s: f64,
+    /// Seconds inside the policy.
+    pub policy_s: f64,
+    /// Decisions made.
+    pub decisions: u64,
+    /// Floating-point operations per decision of the policy, if known (a network).
+    pub flop_per_decision: Option<f64>,
+}
+
+impl Timing {
+    /// The timing of `w`.
+    pub fn of(w: &WorldEval, flop_per_decision: Option<f64>) -> Self {
+        Self { wall_s: w.wall_s, policy_s: w.policy_s, decisions: w.decisions, flop_per_decision }
+    }
+    /// Decisions per wall-clock second.
+    pub fn decisions_per_s(&self) -> f64 {
+        self.decisions as f64 / self.wall_s.max(1e-9)
+    }
+    /// The policy's arithmetic rate while deciding, GFLOP/s.
+    pub fn gflops(&self) -> Option<f64> {
+        self.flop_per_decision.map(|f| f * self.decisions as f64 / self.policy_s.max(1e-9) / 1e9)
+    }
+}
+
+/// `episodes.csv` of several worlds (header included).
+pub fn episodes_csv<'a>(worlds: impl IntoIterator<Item = &'a WorldEval>) -> String {
+    let mut s = String::from(EPISODES_HEADER);
+    s.push('\n');
+    for w in worlds {
+        for r in &w.records {
+            s.push_str(&episode_row(r));
+            s.push('\n');
+        }
+    }
+    s
+}
+
+/// `summary.csv` (header included).
+pub fn summary_csv(rows: &[WorldSummary]) -> String {
+    let mut s = String::from(SUMMARY_HEADER);
+    s.push('\n');
+    for r in rows {
+        s.push_str(&r.csv_row());
+        s.push('\n');
+    }
+    s
+}
+
+/// `summary.md`: the success table as Markdown, with what the numbers mean.
+pub fn summary_markdown(rows: &[WorldSummary]) -> String {
+    let mut s = String::new();
+    if let Some(first) = rows.first() {
+        let _ = writeln!(
+            s,
+            "# Evaluation of {}\n\nSuccess = no collision within {} steps; {} episodes per run, {} runs \
+             per world (mean ± population std over runs), seed {}.\n",
+            first.eval, first.max_steps, first.episodes, first.runs, first.seed
+        );
+    }
+    s.push_str(
+        "| world | success % | per run % | collisions (bumper / pedestrian / laser) | mean steps | mean path m | mean return |\n",
+    );
+    s.push_str("| --- | --- | --- | --- | --- | --- | --- |\n");
+    for r in rows {
+        let per_run: Vec<String> =
+            r.success_per_run.iter().map(|x| format!("{:.0}", 100.0 * x)).collect();
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} / {} / {} | {:.1} | {:.2} | {:.2} |",
+            r.world,
+            r.success_cell(),
+            per_run.join(", "),
+            r.collisions_bumper,
+            r.collisions_pedestrian,
+            r.collisions_laser,
+            r.steps_mean,
+            r.path_m_mean,
+            r.return_mean
+        );
+    }
+    s
+}

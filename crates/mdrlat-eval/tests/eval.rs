@@ -1,0 +1,177 @@
+//! The evaluation protocol: paired starts, byte-reproducible reports, independence from the
+//! number of environments, the summary's arithmetic and the figures' replay.
+
+use mdrlat_core::{Action, Observation, Policy, PolicyError, Sensors};
+use mdrlat_eval::{
+    EvalSettings, Pick, WorldEval, WorldSummary, draw_episode, episode_seed, episodes_csv,
+    eval_sim_config, evaluate_world, pick_episodes, summary_csv,
+};
+use mdrlat_sim::{Scripted, SimConfig};
+use mdrlat_world::World;
+
+fn world(name: &str) -> World {
+    mdrlat_world::builtin::get(name).expect("builtin").expect("valid")
+}
+
+fn small(seed: u64, envs: usize) -> EvalSettings {
+    EvalSettings { episodes: 6, runs: 2, max_steps: 60, seed, envs, sim_threads: 1 }
+}
+
+fn eval(world: &World, policy: Scripted, settings: &EvalSettings) -> WorldEval {
+    let sim = SimConfig::default();
+    let mut p = policy.build(&sim, settings.seed);
+    evaluate_world(world, &sim, p.as_mut(), settings, &mut |_| {}).expect("evaluates")
+}
+
+#[test]
+fn same_seed_same_bytes_other_seed_other_starts() {
+    let w = world("crowd");
+    let a = eval(&w, Scripted::Wander, &small(3, 4));
+    let b = eval(&w, Scripted::Wander, &small(3, 4));
+    assert_eq!(episodes_csv([&a]), episodes_csv([&b]));
+    let s = |e: &WorldEval| summary_csv(&[WorldSummary::new("wander", e, &small(3, 4))]);
+    assert_eq!(s(&a), s(&b));
+    let c = eval(&w, Scripted::Wander, &small(4, 4));
+    assert_ne!(a.records[0].start, c.records[0].start);
+    assert_eq!(a.records.len(), 12);
+    assert_eq!((a.records[7].run, a.records[7].episode), (1, 1));
+}
+
+#[test]
+fn every_method_faces_the_same_starts() {
+    let w = world("office");
+    let starts = |p| -> Vec<_> {
+        eval(&w, p, &small(5, 3)).records.iter().map(|r| (r.seed, r.start)).collect()
+    };
+    let wander = starts(Scripted::Wander);
+    assert_eq!(wander, starts(Scripted::Random));
+    assert_eq!(wander, starts(Scripted::Forward));
+    // A world's starts depend on its name, the run and the episode only.
+    assert_eq!(wander[7].0, episode_seed(5, "office", 1, 1));
+    assert_ne!(episode_seed(5, "office", 0, 1), episode_seed(5, "crowd", 0, 1));
+    assert_ne!(episode_seed(5, "office", 1, 0), episode_seed(5, "office", 0, 1));
+}
+
+#[test]
+fn outcomes_do_not_depend_on_how_many_environments_step_together() {
+    let w = world("crowd");
+    for p in [Scripted::Random, Scripted::WanderLaser] {
+        let one = eval(&w, p, &small(9, 1));
+        let five = eval(&w, p, &small(9, 5));
+        let all = eval(&w, p, &EvalSettings { sim_threads: 2, ..small(9, 64) });
+        assert_eq!(episodes_csv([&one]), episodes_csv([&five]), "{p:?}");
+        assert_eq!(episodes_csv([&one]), episodes_csv([&all]), "{p:?}");
+        assert_eq!(one.records, five.records);
+    }
+}
+
+#[test]
+fn success_is_surviving_the_step_budget_and_the_summary_is_over_runs() {
+    let w = world("office");
+    let e = eval(&w, Scripted::Forward, &small(1, 8));
+    for r in &e.records {
+        assert!(r.steps <= 60 && !r.actions.is_empty());
+        assert_eq!(r.success(), r.steps == 60, "{r:?}");
+        assert_eq!(r.actions.len(), r.steps as usize);
+    }
+    // Hand-made run results: 3/6 and 6/6 → mean 0.75, population std 0.25.
+    let mut fake = e.clone();
+    for (i, r) in fake.records.iter_mut().enumerate() {
+        r.collision = (r.run == 0 && i % 2 == 0).then_some(mdrlat_sim::Collision::LaserRange);
+    }
+    let s = WorldSummary::new("fake", &fake, &small(1, 8));
+    assert_eq!(s.success_per_run, [0.5, 1.0]);
+    assert_eq!((s.success_mean, s.success_std), (0.75, 0.25));
+    assert_eq!(s.collisions_laser, 3);
+    assert_eq!(s.success_cell(), "75.0 ± 25.0");
+    let json: serde_json::Value = serde_json::from_str(&s.json(None)).expect("json");
+    assert_eq!(json["success_mean"], 0.75);
+    assert_eq!(json["world"], "office");
+    assert_eq!(json["runs"], 2);
+}
+
+#[test]
+fn bad_settings_name_the_flag() {
+    let w = world("office");
+    let sim = SimConfig::default();
+    let mut p = Scripted::Wander.build(&sim, 0);
+    for (settings, flag) in [
+        (EvalSettings { episodes: 0, ..small(0, 1) }, "--episodes 0"),
+        (EvalSettings { runs: 0, ..small(0, 1) }, "--runs 0"),
+        (EvalSettings { max_steps: 0, ..small(0, 1) }, "--max-steps 0"),
+        (EvalSettings { envs: 0, ..small(0, 1) }, "--envs 0"),
+    ] {
+        let e = evaluate_world(&w, &sim, p.as_mut(), &settings, &mut |_| {}).expect_err("bad");
+        assert!(e.to_string().contains(flag), "{e}");
+    }
+}
+
+/// A network that has diverged: every Q-value is NaN.
+struct Diverged;
+
+impl Policy for Diverged {
+    fn name(&self) -> String {
+        "diverged".into()
+    }
+    fn sensors(&self) -> Sensors {
+        Sensors::BOTH
+    }
+    fn act(
+        &mut self,
+        batch: &[&Observation],
+        _slots: &[usize],
+        out: &mut Vec<Action>,
+    ) -> Result<(), PolicyError> {
+        mdrlat_core::greedy_actions(&vec![f32::NAN; 10 * batch.len()], batch.len(), out)
+    }
+}
+
+#[test]
+fn a_policy_that_cannot_decide_stops_the_evaluation_with_its_name() {
+    let w = world("crowd");
+    let e = evaluate_world(&w, &SimConfig::default(), &mut Diverged, &small(0, 4), &mut |_| {})
+        .expect_err("NaN Q-values");
+    let text = e.to_string();
+    assert!(text.contains("diverged") && text.contains("non-finite"), "{text}");
+}
+
+#[test]
+fn figures_replay_the_picked_episodes() {
+    let w = world("furnished");
+    let settings = EvalSettings { max_steps: 80, ..small(2, 4) };
+    let e = eval(&w, Scripted::Wander, &settings);
+    let picks = pick_episodes(std::slice::from_ref(&e), 3);
+    assert_eq!(picks.len(), 3);
+    let mut seen = std::collections::HashSet::new();
+    for &(wi, i, why) in &picks {
+        assert_eq!(wi, 0);
+        assert!(seen.insert(i), "picked twice");
+        let r = &e.records[i];
+        if why == Pick::LongestSuccess {
+            assert!(r.success());
+            let longest =
+                e.records.iter().filter(|r| r.success()).map(|r| r.path_m).fold(0.0, f32::max);
+            if picks[0].1 == i {
+                assert_eq!(r.path_m, longest);
+            }
+        }
+        let sim = eval_sim_config(&SimConfig::default(), &settings);
+        let fig = draw_episode(&w, &sim, r, why).expect("replays");
+        assert!(
+            fig.strip.width > 600 && fig.strip.height > 300,
+            "{}x{}",
+            fig.strip.width,
+            fig.strip.height
+        );
+        assert!(fig.trajectory.width > 200);
+        assert_eq!(fig, draw_episode(&w, &sim, r, why).expect("again"), "deterministic pixels");
+    }
+    // A record that is not what its seed and actions give is refused, not drawn.
+    let mut wrong = e.records[picks[0].1].clone();
+    wrong.steps += 1;
+    wrong.actions.push(Action::new(1).expect("action"));
+    wrong.collision = Some(mdrlat_sim::Collision::LaserRange);
+    let sim = eval_sim_config(&SimConfig::default(), &settings);
+    let err = draw_episode(&w, &sim, &wrong, Pick::Longest).expect_err("diverges");
+    assert!(err.to_string().contains("replay"), "{err}");
+}
