@@ -269,6 +269,37 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
         assert!(e.contains(needle), "stderr lacks '{needle}': {e}");
     }
     assert_eq!(e.matches("Connection refused").count(), 1, "one cause, once: {e}");
+    // `mdrlat eval` evaluates the run's network; the results do not depend on how many
+    // environments step together (forwards of a fixed size).
+    let evaluate = |name: &str, envs: &str| {
+        let out = d.join(name);
+        let o = mdrlat(&[
+            "eval",
+            "--checkpoint",
+            r,
+            "--world",
+            "crowd",
+            "--episodes",
+            "3",
+            "--runs",
+            "2",
+            "--max-steps",
+            "25",
+            "--envs",
+            envs,
+            "--out",
+            out.to_str().expect("utf8"),
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let line: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+        assert_eq!(line["world"], "crowd");
+        assert_eq!((line["episodes"].as_u64(), line["runs"].as_u64()), (Some(3), Some(2)));
+        assert!(line["eval"].as_str().is_some_and(|e| e.starts_with("laser-only from")), "{line}");
+        assert!(line["policy_gflops"].as_f64().is_some_and(|g| g > 0.0), "{line}");
+        std::fs::read(out.join("episodes.csv")).expect("episodes.csv")
+    };
+    assert_eq!(evaluate("eval-a", "6"), evaluate("eval-b", "1"));
     let broken = d.join("broken");
     std::fs::create_dir_all(broken.join("checkpoint")).expect("dir");
     std::fs::write(broken.join("checkpoint/meta.json"), "{\"format\": 1").expect("write");
@@ -283,6 +314,92 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
         &["train.batch_size"],
     );
     assert_clean_failure(&mdrlat(&["train", "--out", o, "--set", "train.lr=0.1"]), &["lr"]);
+}
+
+#[test]
+fn eval_writes_reproducible_results_and_refuses_bad_input() {
+    let d = tmp("eval");
+    let run = |name: &str, extra: &[&str]| {
+        let out = d.join(name);
+        let mut args = vec![
+            "eval",
+            "--policy",
+            "wander",
+            "--world",
+            "crowd",
+            "--world",
+            "office",
+            "--episodes",
+            "4",
+            "--runs",
+            "2",
+            "--max-steps",
+            "40",
+            "--out",
+            out.to_str().expect("utf8"),
+        ];
+        args.extend_from_slice(extra);
+        (mdrlat(&args), out)
+    };
+    let (o, a) = run("a", &["--json", "--figures", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let lines: Vec<serde_json::Value> = String::from_utf8(o.stdout)
+        .expect("utf8")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("json line"))
+        .collect();
+    assert_eq!(lines.len(), 2, "one object per world");
+    assert_eq!(
+        (lines[0]["world"].as_str(), lines[1]["world"].as_str()),
+        (Some("crowd"), Some("office"))
+    );
+    for l in &lines {
+        assert_eq!(l["eval"], "wander");
+        let m = l["success_mean"].as_f64().expect("success_mean");
+        assert!((0.0..=1.0).contains(&m) && l["success_std"].as_f64().is_some(), "{l}");
+    }
+    let episodes = std::fs::read_to_string(a.join("episodes.csv")).expect("episodes.csv");
+    assert!(episodes.starts_with(
+        "world,run,episode,seed,x0,y0,yaw0_deg,steps,success,collision,collision_kind,path_m,return\n"
+    ));
+    assert_eq!(episodes.lines().count(), 1 + 2 * 2 * 4);
+    let figures: Vec<_> = std::fs::read_dir(a.join("figures")).expect("figures").collect();
+    assert_eq!(figures.len(), 4, "a strip and a trajectory per picked episode");
+    // Same seed, same bytes (figures included); an existing evaluation is not replaced.
+    let (o, b) = run("b", &["--figures", "2", "--envs", "3"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in ["episodes.csv", "summary.csv", "summary.md"] {
+        assert_eq!(
+            std::fs::read(a.join(f)).expect("a"),
+            std::fs::read(b.join(f)).expect("b"),
+            "{f}"
+        );
+    }
+    assert_clean_failure(&run("a", &[]).0, &["already holds an evaluation", "--overwrite"]);
+    assert!(run("a", &["--overwrite"]).0.status.success());
+    assert!(!a.join("figures").exists(), "old figures removed with --overwrite");
+
+    let out = d.join("bad");
+    let o = out.to_str().expect("utf8");
+    let cases: [(Vec<&str>, &[&str]); 7] = [
+        (vec!["--policy", "wander", "--episodes", "0"], &["--episodes 0"]),
+        (vec!["--policy", "wander", "--max-steps", "-5"], &["--max-steps", "-5"]),
+        (vec!["--policy", "wander", "--world", "nowhere"], &["nowhere"]),
+        (vec!["--policy", "dance"], &["dance", "wander-laser"]),
+        (vec!["--checkpoint", "/no/such/run"], &["/no/such/run"]),
+        (vec!["--checkpoint", "x", "--policy", "wander"], &["--checkpoint", "--policy"]),
+        (vec![], &["--checkpoint", "--policy"]),
+    ];
+    for (args, needles) in cases {
+        let mut full = vec!["eval", "--out", o];
+        full.extend(args);
+        assert_clean_failure(&mdrlat(&full), needles);
+    }
+    let broken = d.join("broken");
+    std::fs::create_dir_all(broken.join("checkpoint")).expect("dir");
+    std::fs::write(broken.join("checkpoint/meta.json"), "{\"format\": 1").expect("write");
+    let o = mdrlat(&["eval", "--checkpoint", broken.to_str().expect("utf8"), "--out", o]);
+    assert_clean_failure(&o, &["meta.json: corrupt"]);
 }
 
 #[test]

@@ -36,16 +36,16 @@ pub struct Args {
     #[arg(long = "world", value_name = "W")]
     worlds: Vec<String>,
     /// Episodes per run (the paper's 50).
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = 50, allow_negative_numbers = true)]
     episodes: u32,
     /// Runs per world, each from other start poses (the paper's 5): mean ± std over runs.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, allow_negative_numbers = true)]
     runs: u32,
     /// Steps an episode must survive without a collision to succeed (the paper's 300).
-    #[arg(long, default_value_t = 300)]
+    #[arg(long, default_value_t = 300, allow_negative_numbers = true)]
     max_steps: u32,
     /// Seed of the start poses: the same seed gives every method the same starts.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     seed: u64,
     /// Output directory: episodes.csv, summary.csv, summary.md (and figures/).
     #[arg(long)]
@@ -54,12 +54,17 @@ pub struct Args {
     #[arg(long)]
     json: bool,
     /// Draw Figs. 6/7 for this many episodes (the longest successes and the dead ends).
-    #[arg(long, default_value_t = 0, value_name = "K")]
+    #[arg(long, default_value_t = 0, value_name = "K", allow_negative_numbers = true)]
     figures: usize,
     /// Environments stepped together; the network decides for all of them in one batch.
     /// Keep it fixed to compare runs byte for byte (a batched forward may round differently).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 64, allow_negative_numbers = true)]
     envs: usize,
+    /// Observations per network forward: a batch is decided in forwards of exactly this many
+    /// (the last padded), side by side on the inference threads. A decision then does not
+    /// depend on which episodes share its batch, so results do not depend on --envs.
+    #[arg(long, default_value_t = 16)]
+    forward_batch: usize,
     /// CPU threads of the network's inference (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -106,6 +111,9 @@ pub fn run(a: &Args) -> Result<()> {
         sim_threads: a.sim_threads.unwrap_or(if a.checkpoint.is_some() { 1 } else { 0 }),
     };
     settings.validate()?;
+    if a.forward_batch == 0 || a.forward_batch > 4096 {
+        bail!("--forward-batch {}: must be 1 to 4096", a.forward_batch);
+    }
     if a.threads == Some(0) || a.threads.is_some_and(|t| t > 1024) {
         bail!("--threads {}: must be 1 to 1024", a.threads.unwrap_or_default());
     }
@@ -125,7 +133,8 @@ pub fn run(a: &Args) -> Result<()> {
                 let device = a.device.device();
                 let p = GreedyPolicy::load(run, &device, a.threads.unwrap_or(cores))
                     .map_err(anyhow::Error::msg)
-                    .with_context(|| format!("--checkpoint {}", run.display()))?;
+                    .with_context(|| format!("--checkpoint {}", run.display()))?
+                    .with_forward_batch(Some(a.forward_batch));
                 let flops = QNetConfig::new(p.variant()).forward_flops() as f64;
                 (Box::new(p), Some(flops))
             }

@@ -1,0 +1,83 @@
+//! The network behind the one `Policy` interface: batched decisions equal one-at-a-time
+//! decisions, inputs go through the shared normalisation, bad checkpoints are errors.
+
+use mdrlat_core::{Action, FRAME_STACK, Observation, Policy, Rng};
+use mdrlat_nn::Variant;
+use mdrlat_nn::burn::prelude::Device;
+use mdrlat_train::{GreedyPolicy, Inputs, observation_inputs};
+
+fn observation(rng: &mut Rng) -> Observation {
+    let mut obs = Observation::zeros();
+    for _ in 0..FRAME_STACK {
+        for r in obs.laser.push_slot() {
+            *r = rng.range_f32(0.2, 5.6);
+        }
+        for d in obs.depth.push_slot() {
+            *d = if rng.below(10) == 0 { 0.0 } else { rng.range_f32(0.4, 9.0) };
+        }
+    }
+    obs
+}
+
+#[test]
+fn a_decision_does_not_depend_on_the_batch_it_is_in() {
+    let mut rng = Rng::seed_from_u64(3);
+    let observations: Vec<Observation> = (0..40).map(|_| observation(&mut rng)).collect();
+    let batch: Vec<&Observation> = observations.iter().collect();
+    let zero = Observation::zeros();
+    for variant in [Variant::LaserOnly, Variant::Mdrlat] {
+        let mut policy = GreedyPolicy::untrained(variant, 7, &Device::flex(), 2).expect("policy");
+        let mut inputs = Inputs::default();
+        observation_inputs(&batch, variant, &mut inputs);
+        let all = policy.q_values(&inputs).expect("q");
+        for (i, obs) in batch.iter().enumerate() {
+            // Alone, padded to the batch size with other rows of zeros... at another position.
+            let mut padded: Vec<&Observation> = vec![&zero; batch.len()];
+            padded[(i + 7) % batch.len()] = obs;
+            observation_inputs(&padded, variant, &mut inputs);
+            let one = policy.q_values(&inputs).expect("q");
+            let j = (i + 7) % batch.len();
+            assert_eq!(
+                one[j * 10..(j + 1) * 10],
+                all[i * 10..(i + 1) * 10],
+                "{variant}: row {i} differs padded"
+            );
+        }
+        let slots: Vec<usize> = (0..batch.len()).collect();
+        let mut actions = Vec::new();
+        policy.act(&batch, &slots, &mut actions).expect("acts");
+        assert_eq!(actions.len(), batch.len());
+        let mut greedy = Vec::new();
+        mdrlat_core::greedy_actions(&all, batch.len(), &mut greedy).expect("finite");
+        assert_eq!(actions, greedy);
+        assert!(actions.iter().all(|a| a.index() < Action::COUNT));
+
+        // In forwards of a fixed size, any sub-batch decides as the whole batch did.
+        let mut fixed = GreedyPolicy::untrained(variant, 7, &Device::flex(), 2)
+            .expect("policy")
+            .with_forward_batch(Some(16));
+        let mut whole = Vec::new();
+        fixed.act(&batch, &slots, &mut whole).expect("acts");
+        for (start, len) in [(0, 1), (3, 5), (10, 17), (1, 39)] {
+            let sub = &batch[start..start + len];
+            let mut part = Vec::new();
+            fixed.act(sub, &slots[start..start + len], &mut part).expect("acts");
+            assert_eq!(part, whole[start..start + len], "{variant}: {start}+{len}");
+        }
+    }
+}
+
+#[test]
+fn missing_and_corrupt_checkpoints_are_errors_naming_the_path() {
+    let dir = std::env::temp_dir().join(format!("mdrlat-policy-{}", std::process::id()));
+    let device = Device::flex();
+    let e = GreedyPolicy::load(&dir.join("nope"), &device, 1).expect_err("missing");
+    assert!(e.contains("nope") && e.contains("no such"), "{e}");
+    std::fs::create_dir_all(dir.join("checkpoint")).expect("dir");
+    let e = GreedyPolicy::load(&dir, &device, 1).expect_err("empty");
+    assert!(e.contains("no checkpoint here"), "{e}");
+    std::fs::write(dir.join("checkpoint/meta.json"), "{ not json").expect("write");
+    let e = GreedyPolicy::load(&dir, &device, 1).expect_err("corrupt");
+    assert!(e.contains("meta.json"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
