@@ -83,6 +83,46 @@ pub fn infer_ms(
     })
 }
 
+/// Median milliseconds of one batched greedy decision for `observations` random
+/// observations of `variant` (as an evaluation makes them: normalisation, forwards of
+/// `forward_batch` rows side by side on `threads` threads, argmax), and the arithmetic rate
+/// that gives, GFLOP/s.
+///
+/// # Panics
+/// If the OS refuses the policy's threads.
+pub fn policy_batch_ms(
+    variant: Variant,
+    device: &Device,
+    observations: usize,
+    forward_batch: Option<usize>,
+    threads: usize,
+    min_time: Duration,
+) -> (f64, f64) {
+    use mdrlat_core::{Observation, Policy};
+    let mut policy = crate::GreedyPolicy::untrained(variant, 0, device, threads)
+        .expect("inference thread pool")
+        .with_forward_batch(forward_batch);
+    let mut rng = Rng::seed_from_u64(6);
+    let obs: Vec<Observation> = (0..observations)
+        .map(|_| {
+            let mut o = Observation::zeros();
+            for _ in 0..FRAME_STACK {
+                o.laser.push_slot().iter_mut().for_each(|r| *r = rng.range_f32(0.2, 5.6));
+                o.depth.push_slot().iter_mut().for_each(|d| *d = rng.range_f32(0.4, 9.0));
+            }
+            o
+        })
+        .collect();
+    let batch: Vec<&Observation> = obs.iter().collect();
+    let slots: Vec<usize> = (0..observations).collect();
+    let mut actions = Vec::new();
+    let (ms, _) = median_ms(min_time, || {
+        let _ = policy.act(&batch, &slots, &mut actions);
+    });
+    let flop = mdrlat_nn::QNetConfig::new(variant).forward_flops() as f64 * observations as f64;
+    (ms, flop / (ms * 1e-3) / 1e9)
+}
+
 /// Bytes of a full replay buffer of `capacity` transitions for `variant`.
 pub fn replay_bytes(variant: Variant, capacity: usize) -> usize {
     let reserve = crate::checkpoint::frame_reserve(capacity);

@@ -4,8 +4,11 @@ use super::bench::cpu_model;
 use super::train::DeviceKind;
 use anyhow::Result;
 use mdrlat_nn::Variant;
-use mdrlat_train::bench::{infer_ms, profile, replay_bytes, update_ms};
+use mdrlat_train::bench::{infer_ms, policy_batch_ms, profile, replay_bytes, update_ms};
 use std::time::Duration;
+
+/// Rows per network forward in `mdrlat eval` (its `--forward-batch` default).
+pub const EVAL_FORWARD_BATCH: usize = 16;
 
 /// Arguments of `mdrlat bench train`.
 #[derive(Debug, clap::Args)]
@@ -50,10 +53,11 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             std::thread::available_parallelism().map_or(1, |n| n.get())
         );
         out!(
-            "{:<11} {:>16} {:>22} {:>14}",
+            "{:<11} {:>16} {:>22} {:>26} {:>14}",
             "variant",
             "train step (ms)",
             "inference, 1 core (ms)",
+            "64 obs, all cores (GFLOP/s)",
             "replay (MiB)"
         );
     }
@@ -61,6 +65,9 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         let (train, n_train) = update_ms(v, a.batch, &device, time);
         let (infer, n_infer) = infer_ms(v, &device, time, 1);
         let replay = replay_bytes(v, 20_000) as f64 / (1024.0 * 1024.0);
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let (batch_ms, batch_gflops) =
+            policy_batch_ms(v, &device, 64, Some(EVAL_FORWARD_BATCH), threads, time);
         if a.json {
             out!(
                 "{}",
@@ -75,10 +82,25 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             );
             out!(
                 "{}",
+                serde_json::json!({"bench": "infer_batch", "variant": v.name(), "backend": backend,
+                    "observations": 64, "forward_batch": EVAL_FORWARD_BATCH, "threads": threads,
+                    "ms": (batch_ms * 1000.0).round() / 1000.0,
+                    "gflops": (batch_gflops * 10.0).round() / 10.0})
+            );
+            out!(
+                "{}",
                 serde_json::json!({"bench": "replay", "variant": v.name(), "capacity": 20_000, "mib": (replay * 10.0).round() / 10.0})
             );
         } else {
-            out!("{:<11} {:>16.1} {:>22.2} {:>14.0}", v.name(), train, infer, replay);
+            let batched = format!("{batch_ms:.1} ms, {batch_gflops:.1}");
+            out!(
+                "{:<11} {:>16.1} {:>22.2} {:>26} {:>14.0}",
+                v.name(),
+                train,
+                infer,
+                batched,
+                replay
+            );
         }
     }
     if a.profile {

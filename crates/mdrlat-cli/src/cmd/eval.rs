@@ -63,15 +63,15 @@ pub struct Args {
     /// Observations per network forward: a batch is decided in forwards of exactly this many
     /// (the last padded), side by side on the inference threads. A decision then does not
     /// depend on which episodes share its batch, so results do not depend on --envs.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = super::bench_train::EVAL_FORWARD_BATCH)]
     forward_batch: usize,
     /// CPU threads of the network's inference (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
-    /// Threads stepping the simulator (default: 1 with a network, which needs the cores;
-    /// all cores for a scripted policy).
-    #[arg(long)]
-    sim_threads: Option<usize>,
+    /// Threads stepping the simulator (0: all cores; measured faster than 1 even beside a
+    /// network, which has the cores to itself while the simulator waits).
+    #[arg(long, default_value_t = 0)]
+    sim_threads: usize,
     /// Compute device of the network.
     #[arg(long, value_enum, default_value = "cpu")]
     device: DeviceKind,
@@ -108,7 +108,7 @@ pub fn run(a: &Args) -> Result<()> {
         max_steps: a.max_steps,
         seed: a.seed,
         envs: a.envs,
-        sim_threads: a.sim_threads.unwrap_or(if a.checkpoint.is_some() { 1 } else { 0 }),
+        sim_threads: a.sim_threads,
     };
     settings.validate()?;
     if a.forward_batch == 0 || a.forward_batch > 4096 {
