@@ -445,7 +445,7 @@ fn node_errors_without_master_or_checkpoint() {
     let out = Command::new(BIN).args(["ros", "--checkpoint", "/nonexistent/run"]).output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("/nonexistent/run: no checkpoint here"), "{err}");
+    assert!(err.contains("/nonexistent/run: no such run directory or checkpoint"), "{err}");
     let out = Command::new(BIN)
         .args(["ros", "--untrained", "--rate-hz", "0", "--master", "http://127.0.0.1:9/"])
         .output()

@@ -109,6 +109,9 @@ impl Image {
     pub fn crop(&self, x: u32, y: u32, width: u32, height: u32) -> Image {
         let w = width.min(self.width.saturating_sub(x));
         let h = height.min(self.height.saturating_sub(y));
+        if w == 0 || h == 0 {
+            return Image::new(0, 0, PAPER);
+        }
         let mut out = Image::new(w, h, PAPER);
         for r in 0..h as usize {
             let s = ((y as usize + r) * self.width as usize + x as usize) * 4;
