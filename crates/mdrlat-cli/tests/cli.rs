@@ -365,7 +365,7 @@ fn eval_writes_reproducible_results_and_refuses_bad_input() {
     assert_eq!(episodes.lines().count(), 1 + 2 * 2 * 4);
     let figures: Vec<_> = std::fs::read_dir(a.join("figures")).expect("figures").collect();
     assert_eq!(figures.len(), 4, "a strip and a trajectory per picked episode");
-    // Same seed, same bytes (figures included); an existing evaluation is not replaced.
+    // Same seed, same bytes (with other --envs); an existing evaluation is not replaced.
     let (o, b) = run("b", &["--figures", "2", "--envs", "3"]);
     assert!(o.status.success(), "{}", stderr(&o));
     for f in ["episodes.csv", "summary.csv", "summary.md"] {

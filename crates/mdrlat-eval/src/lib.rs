@@ -37,6 +37,22 @@ pub enum EvalError {
     /// An episode failed (the policy could not decide).
     #[error(transparent)]
     Run(#[from] mdrlat_sim::RunError),
+    /// The policy could not decide in an episode.
+    #[error("policy '{policy}' in '{world}' run {run} episode {episode} (seed {seed}): {source}")]
+    Policy {
+        /// The policy's name.
+        policy: String,
+        /// The world.
+        world: String,
+        /// Run index.
+        run: u32,
+        /// Episode index in the run.
+        episode: u32,
+        /// The episode's seed.
+        seed: u64,
+        /// What went wrong.
+        source: mdrlat_core::PolicyError,
+    },
     /// Replaying an episode for a figure did not reproduce it.
     #[error("replaying an episode for its figure: {0}")]
     Replay(String),

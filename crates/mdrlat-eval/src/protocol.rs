@@ -32,8 +32,9 @@ pub struct EvalSettings {
     pub seed: u64,
     /// Environments stepped together, the policy deciding for all of them in one batch.
     /// The outcomes do not depend on it for a policy whose decision for one observation does
-    /// not depend on the rest of the batch; keep it fixed to get the same bytes from a
-    /// network policy (a batched forward may round differently).
+    /// not depend on the rest of the batch: the scripted ones, and a network deciding in
+    /// forwards of a fixed size (`GreedyPolicy::with_forward_batch`; a forward's rounding
+    /// depends on its row count).
     pub envs: usize,
     /// Threads stepping the simulator (0: all cores).
     pub sim_threads: usize,
@@ -47,6 +48,9 @@ impl Default for EvalSettings {
 
 /// The most environments an evaluation steps together (each holds ~420 KB of frames).
 pub const MAX_ENVS: usize = 4096;
+
+/// The most episodes of one world (runs × episodes).
+pub const MAX_EPISODES: u64 = 1_000_000;
 
 impl EvalSettings {
     /// Checks the settings.
@@ -64,6 +68,12 @@ impl EvalSettings {
         }
         if self.max_steps == 0 {
             return bad("--max-steps 0", "an episode needs at least 1 step");
+        }
+        if u64::from(self.runs) * u64::from(self.episodes) > MAX_EPISODES {
+            return bad(
+                &format!("--runs {} x --episodes {}", self.runs, self.episodes),
+                &format!("at most {MAX_EPISODES} episodes per world"),
+            );
         }
         if self.envs == 0 || self.envs > MAX_ENVS {
             return bad(&format!("--envs {}", self.envs), &format!("must be 1 to {MAX_ENVS}"));
@@ -255,7 +265,15 @@ pub fn evaluate_world(
     let mut counter =
         Counter { world: &world.name, total: specs.len(), done: 0, successes: 0, progress };
     let options = RunOptions { max_steps: settings.max_steps, record_rows: false };
-    let outcomes = run_episodes(&mut venv, &mut timed, &specs, &options, &mut counter)?;
+    let outcomes = run_episodes(&mut venv, &mut timed, &specs, &options, &mut counter).map_err(
+        |e| match e {
+            mdrlat_sim::RunError::Policy { policy, episode, source } => {
+                let (run, episode, seed) = episodes[episode];
+                EvalError::Policy { policy, world: world.name.clone(), run, episode, seed, source }
+            }
+            other => EvalError::Run(other),
+        },
+    )?;
     let records = episodes
         .iter()
         .zip(outcomes)

@@ -14,11 +14,20 @@ pub const EPISODES_HEADER: &str =
 pub const SUMMARY_HEADER: &str = "eval,world,episodes,runs,max_steps,seed,success_mean,success_std,\
 success_per_run,collisions_bumper,collisions_pedestrian,collisions_laser,steps_mean,path_m_mean,return_mean";
 
+/// A CSV field: quoted (quotes doubled) when it holds a comma, quote or line break.
+pub fn csv_field(text: &str) -> String {
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_string()
+    }
+}
+
 /// One row of `episodes.csv` (no newline).
 pub fn episode_row(r: &EpisodeRecord) -> String {
     format!(
         "{},{},{},{},{:.3},{:.3},{:.1},{},{},{},{},{:.3},{:.4}",
-        r.world,
+        csv_field(&r.world),
         r.run,
         r.episode,
         r.seed,
@@ -116,13 +125,13 @@ impl WorldSummary {
         }
     }
 
-    /// The row of `summary.csv` (no newline). The eval name is quoted (it may hold commas).
+    /// The row of `summary.csv` (no newline); names are quoted where CSV needs it.
     pub fn csv_row(&self) -> String {
         let per_run: Vec<String> = self.success_per_run.iter().map(|x| format!("{x:.6}")).collect();
         format!(
-            "\"{}\",{},{},{},{},{},{:.6},{:.6},{},{},{},{},{:.3},{:.3},{:.4}",
-            self.eval.replace('"', "'"),
-            self.world,
+            "{},{},{},{},{},{},{:.6},{:.6},{},{},{},{},{:.3},{:.3},{:.4}",
+            csv_field(&self.eval),
+            csv_field(&self.world),
             self.episodes,
             self.runs,
             self.max_steps,
@@ -234,7 +243,7 @@ pub fn summary_markdown(rows: &[WorldSummary]) -> String {
         let _ = writeln!(
             s,
             "| {} | {} | {} | {} / {} / {} | {:.1} | {:.2} | {:.2} |",
-            r.world,
+            r.world.replace('|', "\\|"),
             r.success_cell(),
             per_run.join(", "),
             r.collisions_bumper,
@@ -246,4 +255,17 @@ pub fn summary_markdown(rows: &[WorldSummary]) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_fields_are_quoted_only_when_they_must_be() {
+        assert_eq!(csv_field("office"), "office");
+        assert_eq!(csv_field("my,world"), "\"my,world\"");
+        assert_eq!(csv_field("a \"b\""), "\"a \"\"b\"\"\"");
+        assert_eq!(csv_field("mdrlat from runs/a (step 5)"), "mdrlat from runs/a (step 5)");
+    }
 }

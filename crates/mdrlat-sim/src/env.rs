@@ -14,6 +14,9 @@ use mdrlat_geom::{GridScratch, Pose2, Prism, Vec2};
 use mdrlat_world::World;
 use std::sync::Arc;
 
+/// Most time samples of the pedestrians' paths a reset checks.
+const SWEEP_SAMPLES: usize = 1024;
+
 /// Attempts at drawing a collision-free reset pose before giving up.
 const SPAWN_ATTEMPTS: usize = 10_000;
 
@@ -275,8 +278,15 @@ impl Env {
     /// do not react to the robot, so their paths are known before a pose is drawn.
     fn pedestrian_sweep(&self) -> Vec<(Vec2, f32)> {
         let specs = &self.scene.world.pedestrians;
-        let sub_dt = self.config.dt_s / self.config.substeps as f32;
-        let n = (self.config.spawn_pedestrian_horizon_s / sub_dt).ceil() as usize;
+        // The physics sub-step, or coarser for settings that would sample more than
+        // SWEEP_SAMPLES times (pedestrians walk straight between waypoints, so a sample
+        // misses at most speed x step of a path).
+        let horizon = self.config.spawn_pedestrian_horizon_s;
+        let mut sub_dt = self.config.dt_s / self.config.substeps as f32;
+        if horizon / sub_dt > SWEEP_SAMPLES as f32 {
+            sub_dt = horizon / SWEEP_SAMPLES as f32;
+        }
+        let n = ((horizon / sub_dt).ceil() as usize).min(SWEEP_SAMPLES);
         let mut states = self.pedestrians.clone();
         let mut sweep = Vec::with_capacity((n + 1) * states.len());
         for k in 0..=n {

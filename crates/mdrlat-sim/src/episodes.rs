@@ -93,6 +93,9 @@ pub enum RunError {
     /// The observer failed (e.g. a file could not be written).
     #[error("{0}")]
     Observer(Box<dyn std::error::Error + Send + Sync>),
+    /// Episodes were given to a vector without environments.
+    #[error("{0} episodes to run, but the vector has no environments")]
+    NoEnvironments(usize),
 }
 
 /// Watches episodes as they run: progress bars, CSV rows, animation frames.
@@ -139,7 +142,8 @@ struct Running {
 
 /// Runs every episode of `specs` with `policy` on the environments of `venv` (all of them
 /// slots; fewer episodes than slots leave the rest idle) and returns their outcomes in the
-/// order of `specs`. The vector is left without auto-reset.
+/// order of `specs`. With `max_steps` 0 an episode is reset and ends at once, without a
+/// step. The vector's auto-reset mode is restored on return.
 ///
 /// # Errors
 /// A reset that found no free pose, a policy that could not decide, or a failing observer.
@@ -150,36 +154,51 @@ pub fn run_episodes(
     options: &RunOptions,
     observer: &mut dyn Observer,
 ) -> Result<Vec<EpisodeOutcome>, RunError> {
+    let slots = venv.len();
+    if slots == 0 && !specs.is_empty() {
+        return Err(RunError::NoEnvironments(specs.len()));
+    }
+    let auto_reset = venv.auto_reset();
     venv.set_auto_reset(false);
+    let result = run(venv, policy, specs, options, observer);
+    venv.set_auto_reset(auto_reset);
+    result
+}
+
+fn run(
+    venv: &mut VecEnv,
+    policy: &mut dyn Policy,
+    specs: &[EpisodeSpec],
+    options: &RunOptions,
+    observer: &mut dyn Observer,
+) -> Result<Vec<EpisodeOutcome>, RunError> {
     let slots = venv.len();
     let mut done: Vec<Option<EpisodeOutcome>> = (0..specs.len()).map(|_| None).collect();
     let mut running: Vec<Option<Running>> = (0..slots).map(|_| None).collect();
     let mut next = 0usize;
     let start = |venv: &mut VecEnv,
                  policy: &mut dyn Policy,
+                 observer: &mut dyn Observer,
+                 done: &mut Vec<Option<EpisodeOutcome>>,
                  slot: usize,
                  next: &mut usize|
      -> Result<Option<Running>, RunError> {
-        let Some(spec) = specs.get(*next) else { return Ok(None) };
-        venv.reset_env(slot, spec.seed, spec.pose)?;
-        policy.begin_episode(slot, spec.seed);
-        let pose = venv.env(slot).pose();
-        let outcome = EpisodeOutcome {
-            start: pose,
-            steps: 0,
-            reward: 0.0,
-            collision: None,
-            truncated: false,
-            path_m: 0.0,
-            actions: Vec::new(),
-            rows: Vec::new(),
-        };
-        *next += 1;
-        Ok(Some(Running { episode: *next - 1, outcome, last: pose, path_m: 0.0 }))
+        loop {
+            let Some(spec) = specs.get(*next) else { return Ok(None) };
+            let started = start_one(venv, policy, spec, slot, *next)?;
+            *next += 1;
+            if options.max_steps > 0 {
+                return Ok(Some(started));
+            }
+            // A zero step budget: the episode ends where it starts.
+            observer.on_episode(started.episode, &started.outcome);
+            done[started.episode] = Some(started.outcome);
+        }
     };
     for (slot, r) in running.iter_mut().enumerate() {
-        *r = start(venv, policy, slot, &mut next)?;
+        *r = start(venv, policy, observer, &mut done, slot, &mut next)?;
     }
+
     let (mut active, mut actions, mut masked) = (Vec::new(), Vec::new(), vec![None; slots]);
     loop {
         active.clear();
@@ -237,9 +256,33 @@ pub fn run_episodes(
                     observer.on_episode(finished.episode, &finished.outcome);
                     done[finished.episode] = Some(finished.outcome);
                 }
-                running[slot] = start(venv, policy, slot, &mut next)?;
+                running[slot] = start(venv, policy, observer, &mut done, slot, &mut next)?;
             }
         }
     }
     Ok(done.into_iter().map(|o| o.unwrap_or_else(|| unreachable!("every episode ran"))).collect())
+}
+
+/// Resets `slot` for episode `episode` of the list.
+fn start_one(
+    venv: &mut VecEnv,
+    policy: &mut dyn Policy,
+    spec: &EpisodeSpec,
+    slot: usize,
+    episode: usize,
+) -> Result<Running, RunError> {
+    venv.reset_env(slot, spec.seed, spec.pose)?;
+    policy.begin_episode(slot, spec.seed);
+    let pose = venv.env(slot).pose();
+    let outcome = EpisodeOutcome {
+        start: pose,
+        steps: 0,
+        reward: 0.0,
+        collision: None,
+        truncated: false,
+        path_m: 0.0,
+        actions: Vec::new(),
+        rows: Vec::new(),
+    };
+    Ok(Running { episode, outcome, last: pose, path_m: 0.0 })
 }

@@ -254,6 +254,12 @@ impl VecEnv {
     /// Whether finished episodes restart at once (the default, for training) or wait, with
     /// their final observation in place, for [`VecEnv::reset_env`] (the episode runner's
     /// mode: it decides which episode an environment runs next).
+    pub fn auto_reset(&self) -> bool {
+        self.auto_reset
+    }
+
+    /// Sets the mode [`VecEnv::auto_reset`] reports: whether finished episodes restart at
+    /// once or wait for [`VecEnv::reset_env`].
     pub fn set_auto_reset(&mut self, on: bool) {
         self.auto_reset = on;
         for c in &self.chunks {
@@ -441,10 +447,11 @@ impl VecEnv {
     pub fn final_observation(&self, i: usize) -> Option<ObservationRef<'_>> {
         let o = self.outcomes.get(i)?;
         let (k, index) = self.locate(i);
+        // Without auto-reset the final observation is still the environment's own.
         (o.terminated || o.truncated).then(|| ObservationRef {
             chunk: lock(&self.chunks[k]),
             index,
-            last: true,
+            last: self.auto_reset,
         })
     }
 }

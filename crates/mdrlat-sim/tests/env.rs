@@ -345,3 +345,61 @@ fn issue_10_no_seeded_start_collides_before_the_policy_can_act() {
     let blind = SimConfig { spawn_pedestrian_horizon_s: 0.0, ..SimConfig::default() };
     assert!(!lost_starts(&crowd, &blind, 400).is_empty(), "the control lost no start");
 }
+
+#[test]
+fn the_runner_deals_episodes_to_slots_and_leaves_the_vector_as_it_was() {
+    let config = SimConfig::default();
+    let world = mdrlat_world::builtin::get("crowd").expect("builtin").expect("valid");
+    let scene = Arc::new(StaticScene::new(Arc::new(world), &config));
+    let mut venv = VecEnv::new(scene.clone(), config.clone(), 3, 2).expect("venv");
+    let specs: Vec<EpisodeSpec> =
+        (0..7).map(|k| EpisodeSpec { seed: Some(100 + k), pose: None }).collect();
+    let run = |venv: &mut VecEnv, specs: &[EpisodeSpec], max_steps: u32| {
+        let mut policy = RandomPolicy::new(0);
+        let options = RunOptions { max_steps, record_rows: true };
+        run_episodes(venv, &mut policy, specs, &options, &mut Quiet).expect("runs")
+    };
+    let outcomes = run(&mut venv, &specs, 40);
+    assert!(venv.auto_reset(), "the vector's mode is restored");
+    assert_eq!(outcomes.len(), 7);
+    // Each outcome is its spec's episode: the same as running that spec alone.
+    let mut one = VecEnv::new(scene.clone(), config.clone(), 1, 1).expect("venv");
+    for (k, o) in outcomes.iter().enumerate() {
+        let alone = run(&mut one, &specs[k..=k], 40).pop().expect("one");
+        assert_eq!(*o, alone, "episode {k}");
+        assert!(
+            o.steps <= 40 && o.steps as usize == o.rows.len() && o.actions.len() == o.rows.len()
+        );
+        assert_eq!(o.success(), o.rows.last().is_some_and(|r| !r.terminated));
+    }
+    // A zero step budget resets each episode and takes no step; no episodes, no work.
+    let zero = run(&mut venv, &specs[..2], 0);
+    assert!(zero.iter().all(|o| o.steps == 0 && o.rows.is_empty() && o.success()));
+    assert_eq!(zero[1].start, outcomes[1].start);
+    assert!(run(&mut venv, &[], 10).is_empty());
+    let mut empty = VecEnv::new(scene, config, 0, 1).expect("venv");
+    let mut policy = RandomPolicy::new(0);
+    let e = run_episodes(&mut empty, &mut policy, &specs, &RunOptions::default(), &mut Quiet)
+        .expect_err("no environments");
+    assert!(e.to_string().contains("no environments"), "{e}");
+}
+
+#[test]
+fn without_auto_reset_a_finished_environment_keeps_its_final_observation() {
+    let config = SimConfig { max_episode_steps: 3, ..SimConfig::default() };
+    let world = Arc::new(room(""));
+    let scene = Arc::new(StaticScene::new(world, &config));
+    let mut venv = VecEnv::new(scene, config, 2, 1).expect("venv");
+    venv.set_auto_reset(false);
+    venv.reset(5).expect("reset");
+    for _ in 0..3 {
+        venv.step(&[act(8), act(9)]).expect("step");
+    }
+    let last = venv.observation(0).clone();
+    let fin = venv.final_observation(0).expect("ended").clone();
+    assert_eq!(fin, last, "the final observation is the environment's own");
+    assert!(venv.step(&[act(8), act(9)]).is_err(), "a finished episode needs a reset");
+    venv.reset_env(0, Some(1), None).expect("reset one");
+    let masked = venv.step_masked(&[Some(act(8)), None]).expect("masked").to_vec();
+    assert!(masked[0].is_some() && masked[1].is_none());
+}

@@ -196,7 +196,11 @@ impl Policy for GreedyPolicy {
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
         if batch.len() != slots.len() {
-            return Err(PolicyError::Count { expected: slots.len(), got: batch.len() });
+            return Err(PolicyError::Backend(format!(
+                "{} observations but {} slots",
+                batch.len(),
+                slots.len()
+            )));
         }
         if batch.is_empty() {
             out.clear();
@@ -209,20 +213,33 @@ impl Policy for GreedyPolicy {
         }
         let (net, variant, device) = (&self.net, self.variant, &self.device);
         let inputs = &mut self.inputs[..chunks.len()];
-        let q: Result<Vec<Vec<f32>>, PolicyError> = self.pool.install(|| {
-            use rayon::prelude::*;
-            chunks
-                .par_iter()
-                .zip(inputs.par_iter_mut())
-                .map(|(chunk, inputs)| {
-                    observation_inputs(chunk, variant, inputs);
-                    pad_rows(inputs, rows);
-                    let mut q = q_forward(net, variant, device, inputs)?;
-                    q.truncate(chunk.len() * Action::COUNT);
-                    Ok(q)
-                })
-                .collect()
-        });
+        let forward = || -> Result<Vec<Vec<f32>>, PolicyError> {
+            self.pool.install(|| {
+                use rayon::prelude::*;
+                chunks
+                    .par_iter()
+                    .zip(inputs.par_iter_mut())
+                    .map(|(chunk, inputs)| {
+                        observation_inputs(chunk, variant, inputs);
+                        pad_rows(inputs, rows);
+                        let mut q = q_forward(net, variant, device, inputs)?;
+                        q.truncate(chunk.len() * Action::COUNT);
+                        Ok(q)
+                    })
+                    .collect()
+            })
+        };
+        // A panicking backend is a failed decision, reported as one, not a crash.
+        let q = std::panic::catch_unwind(std::panic::AssertUnwindSafe(forward)).unwrap_or_else(
+            |panic| {
+                let what = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| (*s).to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_default();
+                Err(PolicyError::Backend(format!("the network backend panicked: {what}")))
+            },
+        );
         let q: Vec<f32> = q?.concat();
         greedy_actions(&q, batch.len(), out)
     }

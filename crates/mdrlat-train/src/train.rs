@@ -181,8 +181,9 @@ pub fn evaluate(
     step: u64,
 ) -> Result<Evaluation, TrainError> {
     let eval_error = |source| TrainError::Evaluation { step, source };
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut policy =
-        learner.greedy_policy(1).map_err(|e| eval_error(RunError::Observer(e.into())))?;
+        learner.greedy_policy(threads).map_err(|e| eval_error(RunError::Observer(e.into())))?;
     let specs: Vec<EpisodeSpec> = (0..u64::from(config.eval_episodes))
         .map(|k| EpisodeSpec { seed: Some(config.eval_seed + k), pose: None })
         .collect();
@@ -197,15 +198,29 @@ pub fn evaluate(
 }
 
 /// Keeps the rows of a run's CSV file before `step` (and at `step` with `keep_step`): those
-/// a resumed run will not write again. Opens the file for appending.
-fn reopen(path: PathBuf, step: u64, keep_step: bool) -> Result<Csv, TrainError> {
+/// a resumed run will not write again. A file written by an older version with fewer
+/// columns gets `header` and its old rows empty fields for the new columns, so every row
+/// has the header's width. Opens the file for appending.
+fn reopen(path: PathBuf, header: &str, step: u64, keep_step: bool) -> Result<Csv, TrainError> {
     let io = |source| TrainError::Io { path: path.clone(), source };
     let text = std::fs::read_to_string(&path).map_err(io)?;
+    let old_header = text.lines().next().unwrap_or_default();
+    let missing = if old_header != header && header.starts_with(old_header) {
+        header.split(',').count() - old_header.split(',').count()
+    } else {
+        0
+    };
     let mut kept = String::with_capacity(text.len());
     for (i, line) in text.lines().enumerate() {
+        if i == 0 {
+            kept.push_str(if missing > 0 { header } else { line });
+            kept.push('\n');
+            continue;
+        }
         let row_step = line.split(',').next().and_then(|f| f.parse::<u64>().ok());
-        if i == 0 || row_step.is_some_and(|s| s < step || (s == step && keep_step)) {
+        if row_step.is_some_and(|s| s < step || (s == step && keep_step)) {
             kept.push_str(line);
+            kept.push_str(&",".repeat(missing));
             kept.push('\n');
         }
     }
@@ -213,6 +228,13 @@ fn reopen(path: PathBuf, step: u64, keep_step: bool) -> Result<Csv, TrainError> 
     let file = std::fs::OpenOptions::new().append(true).open(&path).map_err(io)?;
     Ok(Csv { path, out: BufWriter::new(file) })
 }
+
+/// The header of `metrics.csv`.
+const METRICS_HEADER: &str =
+    "step,loss_td,loss_at,q_mean,epsilon,episode_reward,episode_length,episodes";
+/// The header of `eval.csv`.
+const EVAL_HEADER: &str =
+    "step,eval_reward_mean,eval_reward_std,eval_length_mean,eval_success_rate,eval_collision_rate";
 
 /// Trains `config.variant` in `world` for `config.total_steps` steps on `device`, writing
 /// `metrics.csv`, `eval.csv` and checkpoints into `dir` (which must exist); with `resume`,
@@ -249,8 +271,13 @@ pub fn train(
         let (run, learner, replay) = checkpoint::load(dir, config, device)?;
         env.restore(&run.env)?;
         // A partial-window row at the checkpoint step is written again, complete.
-        let metrics = reopen(dir.join("metrics.csv"), run.step, run.step % LOG_INTERVAL == 0)?;
-        let evals = reopen(dir.join("eval.csv"), run.step, true)?;
+        let metrics = reopen(
+            dir.join("metrics.csv"),
+            METRICS_HEADER,
+            run.step,
+            run.step % LOG_INTERVAL == 0,
+        )?;
+        let evals = reopen(dir.join("eval.csv"), EVAL_HEADER, run.step, true)?;
         (learner, replay, run, metrics, evals)
     } else {
         // Seeding in one block: network init (inside Learner::new), environment,
@@ -280,14 +307,8 @@ pub fn train(
             replay_bytes: 0,
             replay_checksum: 0,
         };
-        let metrics = Csv::create(
-            dir.join("metrics.csv"),
-            "step,loss_td,loss_at,q_mean,epsilon,episode_reward,episode_length,episodes",
-        )?;
-        let evals = Csv::create(
-            dir.join("eval.csv"),
-            "step,eval_reward_mean,eval_reward_std,eval_length_mean,eval_success_rate,eval_collision_rate",
-        )?;
+        let metrics = Csv::create(dir.join("metrics.csv"), METRICS_HEADER)?;
+        let evals = Csv::create(dir.join("eval.csv"), EVAL_HEADER)?;
         (Learner::new(config, device), replay, run, metrics, evals)
     };
     let mut events = EventWriter::create(dir)
@@ -449,4 +470,37 @@ pub fn train(
     report.episodes = run.episodes;
     report.seconds = started.elapsed().as_secs_f64();
     Ok((report, learner))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resuming_a_run_of_an_older_version_widens_its_csv_to_the_new_header() {
+        let dir = std::env::temp_dir().join(format!("mdrlat-reopen-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("eval.csv");
+        let old = "step,eval_reward_mean,eval_reward_std,eval_length_mean\n\
+                   5000,1.0,0.5,10.00\n10000,2.0,0.5,20.00\n15000,3.0,0.5,30.00\n";
+        std::fs::write(&path, old).expect("write");
+        let mut csv = reopen(path.clone(), EVAL_HEADER, 10_000, true).expect("reopen");
+        csv.line("15000,4.0,0.5,40.00,0.200000,0.800000").expect("append");
+        csv.flush().expect("flush");
+        let text = std::fs::read_to_string(&path).expect("read");
+        assert_eq!(
+            text,
+            format!(
+                "{EVAL_HEADER}\n5000,1.0,0.5,10.00,,\n10000,2.0,0.5,20.00,,\n15000,4.0,0.5,40.00,0.200000,0.800000\n"
+            )
+        );
+        for line in text.lines() {
+            assert_eq!(line.split(',').count(), 6, "{line}");
+        }
+        // A file with the current header is kept as it is.
+        let mut csv = reopen(path.clone(), EVAL_HEADER, 20_000, true).expect("reopen");
+        csv.flush().expect("flush");
+        assert_eq!(std::fs::read_to_string(&path).expect("read"), text);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -119,6 +119,25 @@ pub fn run(a: &TrainArgs) -> Result<()> {
                 out!("  {stage:<52} {ms:>8.1} ms");
             }
         }
+        // A batched decision of 64 observations by forward size (eval's --forward-batch).
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if !a.json {
+            out!("\n{} decisions for 64 observations on {threads} threads:", v.name());
+        }
+        for fb in [None, Some(8), Some(16), Some(32)] {
+            let (ms, gflops) = policy_batch_ms(v, &device, 64, fb, threads, time);
+            let label = fb.map_or("one forward of 64".to_string(), |f| format!("forwards of {f}"));
+            if a.json {
+                out!(
+                    "{}",
+                    serde_json::json!({"bench": "infer_batch_profile", "variant": v.name(),
+                        "observations": 64, "forward_batch": fb.unwrap_or(64), "threads": threads,
+                        "ms": (ms * 1000.0).round() / 1000.0, "gflops": (gflops * 10.0).round() / 10.0})
+                );
+            } else {
+                out!("  {label:<52} {ms:>8.1} ms {gflops:>6.1} GFLOP/s");
+            }
+        }
     }
     Ok(())
 }

@@ -56,9 +56,9 @@ pub struct Args {
     /// Draw Figs. 6/7 for this many episodes (the longest successes and the dead ends).
     #[arg(long, default_value_t = 0, value_name = "K", allow_negative_numbers = true)]
     figures: usize,
-    /// Environments stepped together; the network decides for all of them in one batch.
-    /// Keep it fixed to compare runs byte for byte (a batched forward may round differently).
-    #[arg(long, default_value_t = 64, allow_negative_numbers = true)]
+    /// Environments stepped together; the network decides for all running ones in one
+    /// batch (0: 16 per inference thread, at least 64). Results do not depend on it.
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     envs: usize,
     /// Observations per network forward: a batch is decided in forwards of exactly this many
     /// (the last padded), side by side on the inference threads. A decision then does not
@@ -83,7 +83,8 @@ pub struct Args {
     overwrite: bool,
 }
 
-/// Refuses to mix or silently replace earlier results.
+/// Refuses to mix or silently replace earlier results; with `overwrite`, removes the
+/// figures of the evaluation it replaces (so old pictures do not mix with new ones).
 fn check_out(dir: &Path, overwrite: bool) -> Result<()> {
     let old = ["episodes.csv", "summary.csv", "summary.md"].iter().any(|f| dir.join(f).exists());
     if old && !overwrite {
@@ -92,7 +93,19 @@ fn check_out(dir: &Path, overwrite: bool) -> Result<()> {
             dir.display()
         );
     }
+    let figures = dir.join("figures");
+    if old && figures.is_dir() {
+        std::fs::remove_dir_all(&figures)
+            .with_context(|| format!("cannot remove the old {}", figures.display()))?;
+    }
     ensure_dir(dir)
+}
+
+/// A file-name-safe form of a world's name.
+fn file_stem(name: &str) -> String {
+    name.chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+        .collect()
 }
 
 fn write(path: &Path, text: &str) -> Result<()> {
@@ -102,20 +115,24 @@ fn write(path: &Path, text: &str) -> Result<()> {
 /// Runs `mdrlat eval`.
 pub fn run(a: &Args) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if a.threads == Some(0) || a.threads.is_some_and(|t| t > 1024) {
+        bail!("--threads {}: must be 1 to 1024", a.threads.unwrap_or_default());
+    }
     let settings = EvalSettings {
         episodes: a.episodes,
         runs: a.runs,
         max_steps: a.max_steps,
         seed: a.seed,
-        envs: a.envs,
+        envs: if a.envs == 0 {
+            (16 * a.threads.unwrap_or(cores)).clamp(64, mdrlat_eval::protocol::MAX_ENVS)
+        } else {
+            a.envs
+        },
         sim_threads: a.sim_threads,
     };
     settings.validate()?;
     if a.forward_batch == 0 || a.forward_batch > 4096 {
         bail!("--forward-batch {}: must be 1 to 4096", a.forward_batch);
-    }
-    if a.threads == Some(0) || a.threads.is_some_and(|t| t > 1024) {
-        bail!("--threads {}: must be 1 to 1024", a.threads.unwrap_or_default());
     }
     let config = Config::load_or_default(a.config.as_deref())?;
     let names: Vec<String> = if a.worlds.is_empty() {
@@ -197,18 +214,14 @@ pub fn run(a: &Args) -> Result<()> {
     let mut written = vec!["episodes.csv", "summary.csv", "summary.md"];
 
     let dir = a.out.join("figures");
-    if dir.is_dir() {
-        // Pictures of an earlier evaluation (only here with --overwrite) must not mix in.
-        std::fs::remove_dir_all(&dir)
-            .with_context(|| format!("cannot remove the old {}", dir.display()))?;
-    }
     if a.figures > 0 {
         ensure_dir(&dir)?;
         for (w, i, why) in pick_episodes(&evals, a.figures) {
             let record = &evals[w].records[i];
             let sim = eval_sim_config(&config.sim, &settings);
             let fig = draw_episode(&worlds[w], &sim, record, why)?;
-            let stem = format!("{}-run{}-ep{}", record.world, record.run, record.episode);
+            let stem =
+                format!("{}-run{}-ep{}", file_stem(&record.world), record.run, record.episode);
             fig.strip.save_png(&dir.join(format!("{stem}.png")))?;
             fig.trajectory.save_png(&dir.join(format!("{stem}-trajectory.png")))?;
         }
