@@ -99,6 +99,17 @@ impl QNetConfig {
         2 * macs as u64
     }
 
+    /// Floating-point operations of one greedy decision ([`QNet::q_values`]): the forward
+    /// pass without the auxiliary head (~26.6 M for MDRLAT).
+    pub fn decision_flops(&self) -> u64 {
+        let aux = if self.variant.auxiliary_task() {
+            2 * (self.representation() * HIDDEN + HIDDEN * VELOCITY_OUT) as u64
+        } else {
+            0
+        };
+        self.forward_flops() - aux
+    }
+
     /// Builds the network on `device` with weights drawn from `seed` (the same on every
     /// backend and in every thread; see the `init` module).
     pub fn init_seeded(&self, device: &Device, seed: u64) -> QNet {
@@ -440,6 +451,24 @@ impl QNet {
             timed("velocity head (AT)", &mut || v.forward(h.clone()));
         }
         times
+    }
+
+    /// Q-values alone (paper eq. 11), without the auxiliary head: what acting and the
+    /// double-DQN targets (eq. 10) need; the same values as `forward(…).q`.
+    ///
+    /// # Shapes
+    /// As [`QNet::forward`]; `[B, actions]`.
+    ///
+    /// # Panics
+    /// If an input the variant needs is missing.
+    pub fn q_values(
+        &self,
+        laser: Option<Tensor<3>>,
+        depth: Option<DepthInput>,
+        goal: Option<Tensor<2>>,
+    ) -> Tensor<2> {
+        let h = self.representation(laser, depth, goal);
+        dueling(self.value.forward(h.clone()), self.advantage.forward(h))
     }
 
     /// Q-values and, with the auxiliary task, the velocity estimate.

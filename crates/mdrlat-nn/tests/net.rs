@@ -19,6 +19,12 @@ fn forward_flops_count_every_layer() {
         QNetConfig::new(Variant::LaserOnly).forward_flops(),
         2 * (237_568 + 2 * 1024 * 512 + 512 * 11)
     );
+    // A decision skips the auxiliary head: 4096 x 512 + 512 x 6 fewer multiply-adds.
+    assert_eq!(QNetConfig::new(Variant::Mdrlat).decision_flops(), 2 * 13_293_056);
+    assert_eq!(
+        QNetConfig::new(Variant::Multi).decision_flops(),
+        QNetConfig::new(Variant::Multi).forward_flops()
+    );
     let f = |v| QNetConfig::new(v).forward_flops();
     assert!(f(Variant::Multi) < f(Variant::MultiAt) && f(Variant::MultiAt) < f(Variant::Mdrlat));
     assert!(f(Variant::Multi) < f(Variant::MultiBf) && f(Variant::MultiBf) < f(Variant::Mdrlat));
@@ -64,8 +70,11 @@ fn every_intermediate_shape() {
         };
         assert_eq!(h.dims(), [b, expect_h], "{variant}");
         assert_eq!(cfg.representation(), expect_h);
+        let q_only = net.q_values(laser.clone(), depth.clone(), None);
         let out = net.forward(laser, depth, None);
         assert_eq!(out.q.dims(), [b, 10]);
+        let values = |t: Tensor<2>| t.into_data().to_vec::<f32>().expect("f32");
+        assert_eq!(values(q_only), values(out.q.clone()), "{variant}: q_values = forward().q");
         assert_eq!(out.velocity.map(|v| v.dims()), variant.auxiliary_task().then_some([b, 6]));
     }
     let cfg = QNetConfig::new(Variant::Mdrlat);

@@ -119,7 +119,7 @@ pub fn policy_batch_ms(
     let (ms, _) = median_ms(min_time, || {
         let _ = policy.act(&batch, &slots, &mut actions);
     });
-    let flop = mdrlat_nn::QNetConfig::new(variant).forward_flops() as f64 * observations as f64;
+    let flop = mdrlat_nn::QNetConfig::new(variant).decision_flops() as f64 * observations as f64;
     (ms, flop / (ms * 1e-3) / 1e9)
 }
 

@@ -114,7 +114,7 @@ pub(crate) fn q_forward(
     }
     let l = variant.uses_laser().then(|| tensor3(&inputs.laser, b, device));
     let d = variant.uses_depth().then(|| tensor4(&inputs.depth, b, device));
-    let q = net.forward(l, d, None).q;
+    let q = net.q_values(l, d, None);
     q.into_data()
         .try_to_vec::<f32>()
         .map_err(|e| PolicyError::Backend(format!("reading Q-values: {e:?}")))
@@ -239,8 +239,8 @@ impl Learner {
         let b = batch.size;
         let (nl, nd) = self.inputs::<false>(&batch.next_laser, &batch.next_depth, b);
         let (online_next, target_next) = self.both(
-            || self.plain.forward(nl.clone(), nd.clone(), None).q,
-            || self.target.forward(nl.clone(), nd.clone(), None).q,
+            || self.plain.q_values(nl.clone(), nd.clone(), None),
+            || self.target.q_values(nl.clone(), nd.clone(), None),
         );
         let best_next = online_next.argmax(1); // [B, 1]
         let q_next = target_next.gather(1, best_next); // [B, 1]
@@ -260,7 +260,7 @@ impl Learner {
     /// Q⁻(s', a) of the target network for every action, `[B][actions]` row-major.
     pub fn target_q_next(&self, batch: &Batch) -> Vec<f32> {
         let (nl, nd) = self.inputs::<false>(&batch.next_laser, &batch.next_depth, batch.size);
-        self.target.forward(nl, nd, None).q.into_data().try_to_vec::<f32>().unwrap_or_default()
+        self.target.q_values(nl, nd, None).into_data().try_to_vec::<f32>().unwrap_or_default()
     }
 
     /// Runs two independent computations, side by side where that pays (see

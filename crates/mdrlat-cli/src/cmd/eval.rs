@@ -152,7 +152,7 @@ pub fn run(a: &Args) -> Result<()> {
                     .map_err(anyhow::Error::msg)
                     .with_context(|| format!("--checkpoint {}", run.display()))?
                     .with_forward_batch(Some(a.forward_batch));
-                let flops = QNetConfig::new(p.variant()).forward_flops() as f64;
+                let flops = QNetConfig::new(p.variant()).decision_flops() as f64;
                 (Box::new(p), Some(flops))
             }
             (None, Some(s)) => (s.build(&config.sim, a.seed), None),
