@@ -73,7 +73,7 @@ fn every_intermediate_shape() {
         let q_only = net.q_values(laser.clone(), depth.clone(), None);
         let out = net.forward(laser, depth, None);
         assert_eq!(out.q.dims(), [b, 10]);
-        let values = |t: Tensor<2>| t.into_data().to_vec::<f32>().expect("f32");
+        let values = |t: Tensor<2>| t.into_data().try_to_vec::<f32>().expect("f32");
         assert_eq!(values(q_only), values(out.q.clone()), "{variant}: q_values = forward().q");
         assert_eq!(out.velocity.map(|v| v.dims()), variant.auxiliary_task().then_some([b, 6]));
     }
