@@ -35,7 +35,8 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Runs a seeded episode in a built-in world, writes a GIF, pictures and the trajectory,
-    /// then benchmarks the simulator. The first thing to run.
+    /// evaluates the scripted baselines in `office` (a small success table), then
+    /// benchmarks the simulator. The first thing to run.
     Demo(cmd::demo::Args),
     /// Lists the built-in worlds.
     Worlds,

@@ -222,27 +222,38 @@ pub fn summary_csv(rows: &[WorldSummary]) -> String {
     s
 }
 
-/// `summary.md`: the success table as Markdown, with what the numbers mean.
+/// `summary.md`: the success table as Markdown, with what the numbers mean; rows of several
+/// methods (the same protocol) get a method column.
 pub fn summary_markdown(rows: &[WorldSummary]) -> String {
     let mut s = String::new();
+    let several = rows.iter().any(|r| r.eval != rows[0].eval);
     if let Some(first) = rows.first() {
+        let title = if several { String::new() } else { format!(" of {}", first.eval) };
         let _ = writeln!(
             s,
-            "# Evaluation of {}\n\nSuccess = no collision within {} steps; {} episodes per run, {} runs \
+            "# Evaluation{title}\n\nSuccess = no collision within {} steps; {} episodes per run, {} runs \
              per world (mean ± population std over runs), seed {}.\n",
-            first.eval, first.max_steps, first.episodes, first.runs, first.seed
+            first.max_steps, first.episodes, first.runs, first.seed
         );
     }
-    s.push_str(
-        "| world | success % | per run % | collisions (bumper / pedestrian / laser) | mean steps | mean path m | mean return |\n",
+    let method = if several { "| method " } else { "" };
+    let _ = writeln!(
+        s,
+        "{method}| world | success % | per run % | collisions (bumper / pedestrian / laser) | mean steps | mean path m | mean return |"
     );
-    s.push_str("| --- | --- | --- | --- | --- | --- | --- |\n");
+    let _ = writeln!(
+        s,
+        "{}| --- | --- | --- | --- | --- | --- | --- |",
+        if several { "| --- " } else { "" }
+    );
     for r in rows {
         let per_run: Vec<String> =
             r.success_per_run.iter().map(|x| format!("{:.0}", 100.0 * x)).collect();
+        let method =
+            if several { format!("| {} ", r.eval.replace('|', "\\|")) } else { String::new() };
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} / {} / {} | {:.1} | {:.2} | {:.2} |",
+            "{method}| {} | {} | {} | {} / {} / {} | {:.1} | {:.2} | {:.2} |",
             r.world.replace('|', "\\|"),
             r.success_cell(),
             per_run.join(", "),
@@ -267,5 +278,36 @@ mod tests {
         assert_eq!(csv_field("my,world"), "\"my,world\"");
         assert_eq!(csv_field("a \"b\""), "\"a \"\"b\"\"\"");
         assert_eq!(csv_field("mdrlat from runs/a (step 5)"), "mdrlat from runs/a (step 5)");
+    }
+
+    fn summary(eval: &str, success: f64) -> WorldSummary {
+        WorldSummary {
+            eval: eval.into(),
+            world: "office".into(),
+            episodes: 10,
+            runs: 2,
+            max_steps: 300,
+            seed: 0,
+            success_mean: success,
+            success_std: 0.05,
+            success_per_run: vec![success - 0.05, success + 0.05],
+            collisions_bumper: 3,
+            collisions_pedestrian: 0,
+            collisions_laser: 2,
+            steps_mean: 100.0,
+            path_m_mean: 5.0,
+            return_mean: 10.0,
+        }
+    }
+
+    #[test]
+    fn the_markdown_table_names_the_method_when_it_holds_several() {
+        let one = summary_markdown(&[summary("wander", 0.15)]);
+        assert!(one.starts_with("# Evaluation of wander\n"), "{one}");
+        assert!(one.contains("| office | 15.0 ± 5.0 | 10, 20 | 3 / 0 / 2 |"), "{one}");
+        let two = summary_markdown(&[summary("wander", 0.15), summary("random", 0.05)]);
+        assert!(two.starts_with("# Evaluation\n") && two.contains("| method | world |"), "{two}");
+        assert!(two.contains("| random | office | 5.0 ± 5.0 |"), "{two}");
+        assert_eq!(two.lines().filter(|l| l.starts_with('|')).count(), 4);
     }
 }

@@ -1,5 +1,6 @@
 //! `mdrlat demo`: the first thing a new user runs. A seeded episode in a built-in world,
-//! rendered to a GIF and pictures, every built-in world drawn, and the simulator benchmark.
+//! rendered to a GIF and pictures, a small success table of the scripted baselines, every
+//! built-in world drawn, and the simulator benchmark.
 
 use super::bench::{SimArgs, cpu_model, measure};
 use super::rollout::{Recorder, parse_scripted, single_env};
@@ -7,6 +8,7 @@ use super::{ensure_dir, load_world, px_per_m};
 use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result};
+use mdrlat_eval::{EvalSettings, WorldSummary, evaluate_world, summary_markdown};
 use mdrlat_render::{Scene, top_view};
 use mdrlat_sim::{EpisodeSpec, Scripted};
 use std::path::PathBuf;
@@ -89,6 +91,30 @@ pub fn run(a: &Args) -> Result<()> {
         a.out.join("end.png").display()
     );
 
+    // The measuring instrument of the paper's Table 2, shortened: scripted baselines in an
+    // unseen world, the same starts for both.
+    let settings =
+        EvalSettings { episodes: 10, runs: 2, sim_threads: 0, ..EvalSettings::default() };
+    let office = load_world("office")?;
+    let mut rows = Vec::new();
+    for p in [Scripted::Wander, Scripted::Random] {
+        let mut policy = p.build(&config.sim, 0);
+        let e = evaluate_world(&office, &config.sim, policy.as_mut(), &settings, &mut |_| {})?;
+        rows.push(WorldSummary::new(p.name(), &e, &settings));
+    }
+    let eval_dir = a.out.join("eval");
+    ensure_dir(&eval_dir)?;
+    let table = eval_dir.join("summary.md");
+    std::fs::write(&table, summary_markdown(&rows))
+        .with_context(|| format!("cannot write {}", table.display()))?;
+    out!(
+        "\nsuccess in 'office' (no collision in 300 steps, 2 runs x 10 episodes; `mdrlat eval` runs the paper's 5 x 50):"
+    );
+    for r in &rows {
+        out!("  {:<8} {} %", r.eval, r.success_cell());
+    }
+    out!("  {}", table.display());
+
     let worlds_dir = a.out.join("worlds");
     ensure_dir(&worlds_dir)?;
     for name in mdrlat_world::builtin::NAMES {
@@ -125,7 +151,7 @@ pub fn run(a: &Args) -> Result<()> {
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     out!(
-        "\nnext: mdrlat render --world office --out office.png | mdrlat observe --world train --pose 3,2,90\n      mdrlat train --variant laser-only --steps 5000 --out runs/quick | mdrlat --help"
+        "\nnext: mdrlat render --world office --out office.png | mdrlat observe --world train --pose 3,2,90\n      mdrlat train --variant laser-only --steps 5000 --out runs/quick | mdrlat eval --checkpoint runs/quick --out eval/quick | mdrlat --help"
     );
     Ok(())
 }
