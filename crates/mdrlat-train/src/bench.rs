@@ -123,6 +123,38 @@ pub fn policy_batch_ms(
     (ms, flop / (ms * 1e-3) / 1e9)
 }
 
+/// The machine's own fp32 GEMM rate through the same library the learner uses (burn's
+/// `flex` backend, whose matrix products are the `gemm` crate's): one `n × n × n` product
+/// per thread on `threads` threads at once, GFLOP/s summed over the threads. The yardstick
+/// the learner's and the evaluation's arithmetic rates are divided by.
+///
+/// # Panics
+/// If the OS refuses the measurement's threads.
+pub fn gemm_reference_gflops(n: usize, threads: usize, min_time: Duration) -> f64 {
+    use mdrlat_nn::burn::prelude::*;
+    use rayon::prelude::*;
+    let device = Device::flex();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .build()
+        .expect("gemm reference thread pool");
+    let mut rng = Rng::seed_from_u64(8);
+    let mut matrix = || {
+        let v: Vec<f32> = (0..n * n).map(|_| rng.range_f32(-1.0, 1.0)).collect();
+        Tensor::<2>::from_data(TensorData::new(v, [n, n]), &device)
+    };
+    let (a, b) = (matrix(), matrix());
+    let (ms, _) = pool.install(|| {
+        median_ms(min_time, || {
+            (0..threads.max(1)).into_par_iter().for_each(|_| {
+                let c = a.clone().matmul(b.clone());
+                let _ = c.into_data();
+            });
+        })
+    });
+    2.0 * (n as f64).powi(3) * threads.max(1) as f64 / (ms * 1e-3) / 1e9
+}
+
 /// Bytes of a full replay buffer of `capacity` transitions for `variant`.
 pub fn replay_bytes(variant: Variant, capacity: usize) -> usize {
     let reserve = crate::checkpoint::frame_reserve(capacity);

@@ -4,7 +4,9 @@ use super::bench::cpu_model;
 use super::train::DeviceKind;
 use anyhow::Result;
 use mdrlat_nn::Variant;
-use mdrlat_train::bench::{infer_ms, policy_batch_ms, profile, replay_bytes, update_ms};
+use mdrlat_train::bench::{
+    gemm_reference_gflops, infer_ms, policy_batch_ms, profile, replay_bytes, update_ms,
+};
 use std::time::Duration;
 
 /// Rows per network forward in `mdrlat eval` (its `--forward-batch` default).
@@ -46,6 +48,20 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let time = Duration::from_secs_f64(a.seconds.max(0.05));
     let device = a.device.device();
     let backend = a.device.name();
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    // The limit, measured in the same run: the same GEMM library on every core.
+    let reference = gemm_reference_gflops(2048, threads, time.min(Duration::from_secs(2)));
+    if a.json {
+        out!(
+            "{}",
+            serde_json::json!({"bench": "gemm_reference", "library": "burn-flex (gemm crate)",
+                "n": 2048, "threads": threads, "gflops": (reference * 10.0).round() / 10.0})
+        );
+    } else {
+        out!(
+            "reference: fp32 GEMM 2048^3 through burn-flex (the gemm crate), one per core on {threads} threads: {reference:.1} GFLOP/s"
+        );
+    }
     if !a.json {
         out!(
             "learner speed on {backend} (cpu: {}, {} threads)",
@@ -57,7 +73,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             "variant",
             "train step (ms)",
             "inference, 1 core (ms)",
-            "64 obs, all cores (GFLOP/s)",
+            "64 obs, all cores (GFLOP/s, /ref)",
             "replay (MiB)"
         );
     }
@@ -65,7 +81,6 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         let (train, n_train) = update_ms(v, a.batch, &device, time);
         let (infer, n_infer) = infer_ms(v, &device, time, 1);
         let replay = replay_bytes(v, 20_000) as f64 / (1024.0 * 1024.0);
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let (batch_ms, batch_gflops) =
             policy_batch_ms(v, &device, 64, Some(EVAL_FORWARD_BATCH), threads, time);
         if a.json {
@@ -85,14 +100,16 @@ pub fn run(a: &TrainArgs) -> Result<()> {
                 serde_json::json!({"bench": "infer_batch", "variant": v.name(), "backend": backend,
                     "observations": 64, "forward_batch": EVAL_FORWARD_BATCH, "threads": threads,
                     "ms": (batch_ms * 1000.0).round() / 1000.0,
-                    "gflops": (batch_gflops * 10.0).round() / 10.0})
+                    "gflops": (batch_gflops * 10.0).round() / 10.0,
+                    "efficiency": (batch_gflops / reference * 1000.0).round() / 1000.0})
             );
             out!(
                 "{}",
                 serde_json::json!({"bench": "replay", "variant": v.name(), "capacity": 20_000, "mib": (replay * 10.0).round() / 10.0})
             );
         } else {
-            let batched = format!("{batch_ms:.1} ms, {batch_gflops:.1}");
+            let batched =
+                format!("{batch_ms:.1} ms, {batch_gflops:.1} ({:.2})", batch_gflops / reference);
             out!(
                 "{:<11} {:>16.1} {:>22.2} {:>26} {:>14.0}",
                 v.name(),
@@ -120,7 +137,6 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             }
         }
         // A batched decision of 64 observations by forward size (eval's --forward-batch).
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         if !a.json {
             out!("\n{} decisions for 64 observations on {threads} threads:", v.name());
         }
