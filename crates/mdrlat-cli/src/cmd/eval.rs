@@ -50,7 +50,7 @@ pub struct Args {
     /// Output directory: episodes.csv, summary.csv, summary.md (and figures/).
     #[arg(long)]
     out: PathBuf,
-    /// Also print one JSON object per world on stdout (results and timing).
+    /// Print one JSON object per world on stdout (results and timing) instead of the table.
     #[arg(long)]
     json: bool,
     /// Draw Figs. 6/7 for this many episodes (the longest successes and the dead ends).
