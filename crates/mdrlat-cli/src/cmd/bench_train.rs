@@ -1,4 +1,5 @@
-//! `mdrlat bench train`: learner speed per variant, inference latency, replay memory.
+//! `mdrlat bench train`: the GEMM reference, learner speed per variant, inference latency
+//! (one decision, and a batch of 64), replay memory.
 
 use super::bench::cpu_model;
 use super::train::DeviceKind;
@@ -49,7 +50,8 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     let device = a.device.device();
     let backend = a.device.name();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    // The limit, measured in the same run: the same GEMM library on every core.
+    // The limit, measured in the same run: the same GEMM library (burn-flex's, whatever
+    // --device is) on every core.
     let reference = gemm_reference_gflops(2048, threads, time.min(Duration::from_secs(2)));
     if a.json {
         out!(
@@ -69,7 +71,7 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             std::thread::available_parallelism().map_or(1, |n| n.get())
         );
         out!(
-            "{:<11} {:>16} {:>22} {:>26} {:>14}",
+            "{:<11} {:>16} {:>22} {:>33} {:>14}",
             "variant",
             "train step (ms)",
             "inference, 1 core (ms)",

@@ -108,7 +108,10 @@ pub fn run(a: &Args) -> Result<()> {
     std::fs::write(&table, summary_markdown(&rows))
         .with_context(|| format!("cannot write {}", table.display()))?;
     out!(
-        "\nsuccess in 'office' (no collision in 300 steps, 2 runs x 10 episodes; `mdrlat eval` runs the paper's 5 x 50):"
+        "\nsuccess in 'office' (no collision in {} steps, {} runs x {} episodes; `mdrlat eval` runs the paper's 5 x 50):",
+        settings.max_steps,
+        settings.runs,
+        settings.episodes
     );
     for r in &rows {
         out!("  {:<8} {} %", r.eval, r.success_cell());
