@@ -142,6 +142,25 @@ pub fn read_net(net: &mut QNet, path: &Path, variant: Variant) -> Result<(), Str
     Ok(())
 }
 
+/// Rewrites a burnpack file with its tensors' data in name order. burn writes an optimiser's
+/// state in the order of a hash map, which differs in every process; in name order the same
+/// state gives the same file bytes (the tensors are found by name either way).
+fn in_name_order(path: &Path) -> Result<(), String> {
+    let reader = burn_pack::Reader::from_file(path).map_err(|e| e.to_string())?;
+    let metadata = reader.metadata().clone();
+    let scalars = reader.scalars().clone();
+    let mut tensors = reader.into_tensors().map_err(|e| e.to_string())?;
+    tensors.sort_by(|a, b| a.name.cmp(&b.name));
+    let mut writer = burn_pack::Writer::new(tensors).auto_extension(false).overwrite(true);
+    for (key, value) in &metadata {
+        writer = writer.with_metadata(key, value);
+    }
+    for (key, value) in scalars {
+        writer = writer.with_scalar(&key, value);
+    }
+    writer.write_to_file(path).map_err(|e| e.to_string())
+}
+
 impl Learner {
     /// A fresh learner: the network is initialised from `seed` on `device`, the target is a
     /// copy (Algorithm 1, line 1).
@@ -364,7 +383,9 @@ impl Learner {
         };
         self.online.save_into(&mut store("online.bpk")).map_err(|e| format!("online.bpk: {e}"))?;
         self.target.save_into(&mut store("target.bpk")).map_err(|e| format!("target.bpk: {e}"))?;
-        self.optim.save(dir.join("optimizer.bpk")).map_err(|e| format!("optimizer.bpk: {e}"))
+        let optimizer = dir.join("optimizer.bpk");
+        self.optim.save(&optimizer).map_err(|e| format!("optimizer.bpk: {e}"))?;
+        in_name_order(&optimizer).map_err(|e| format!("optimizer.bpk: {e}"))
     }
 
     /// A learner restored from [`Learner::save`] files, `updates` gradient steps in.

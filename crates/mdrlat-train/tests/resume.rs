@@ -106,3 +106,40 @@ fn bad_checkpoints_are_clear_errors_never_a_fresh_start() {
         .expect_err("none");
     assert!(e.to_string().contains("no checkpoint"), "{e}");
 }
+
+#[test]
+fn two_runs_with_one_seed_write_the_same_file_bytes() {
+    // The files a user checksums: weights, optimiser state, replay, metrics (burn numbers
+    // parameters at random and writes its maps in hash order; mdrlat numbers them in order
+    // and stores tensors by name). TensorBoard event files carry wall-clock times by design.
+    let dev = Device::flex();
+    let runs: Vec<PathBuf> = ["same-a", "same-b"].iter().map(|n| dir(n)).collect();
+    let mut learners = Vec::new();
+    for d in &runs {
+        let (_, l) = train(world(), &sim(), &config(Variant::MultiAt, 120), &dev, d, false, |_| {})
+            .expect("run");
+        mdrlat_train::export::save_safetensors(
+            &l.policy_net(),
+            Variant::MultiAt,
+            &d.join("model.safetensors"),
+        )
+        .expect("export");
+        learners.push(l);
+    }
+    let bytes = |d: &Path, f: &str| std::fs::read(d.join(f)).expect(f);
+    for f in [
+        "model.safetensors",
+        "checkpoint/online.bpk",
+        "checkpoint/target.bpk",
+        "checkpoint/optimizer.bpk",
+        "checkpoint/replay.bin",
+        "checkpoint/meta.json",
+        "metrics.csv",
+        "eval.csv",
+    ] {
+        assert!(bytes(&runs[0], f) == bytes(&runs[1], f), "{f} differs between the two runs");
+    }
+    for d in &runs {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}
