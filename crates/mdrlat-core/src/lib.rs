@@ -17,7 +17,7 @@ pub use obs::{
     FRAME_STACK, FrameStack, LASER_BEAMS, LASER_FOV_DEG, LASER_MAX_RANGE_M, ODOM_HISTORY,
     Observation, laser_beam_angle, normalize_depth, normalize_laser,
 };
-pub use policy::{Policy, PolicyError, Sensors, greedy_actions};
+pub use policy::{Policy, PolicyError, Sensors, catch_panic, check_batch, greedy_actions};
 pub use rng::Rng;
 
 /// Robot constants shared by the simulator and the world checks (turtlebot2 / Kobuki).

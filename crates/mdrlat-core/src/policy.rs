@@ -98,6 +98,41 @@ pub trait Policy: Send {
     ) -> Result<(), PolicyError>;
 }
 
+/// Checks that every observation of a batch comes with its slot.
+///
+/// # Errors
+/// [`PolicyError::Backend`] naming both lengths.
+pub fn check_batch(batch: &[&Observation], slots: &[usize]) -> Result<(), PolicyError> {
+    if batch.len() != slots.len() {
+        return Err(PolicyError::Backend(format!(
+            "{} observations but {} slots",
+            batch.len(),
+            slots.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Runs a decision, turning a panic inside it (a backend's bug) into a
+/// [`PolicyError::Backend`] that names `what` panicked and why: a failed decision the caller
+/// can report (the ROS node stops the robot), not a crash.
+///
+/// # Errors
+/// `decide`'s own error, or the panic.
+pub fn catch_panic<T>(
+    what: &str,
+    decide: impl FnOnce() -> Result<T, PolicyError>,
+) -> Result<T, PolicyError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(decide)).unwrap_or_else(|panic| {
+        let why = panic
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Err(PolicyError::Backend(format!("{what} panicked: {why}")))
+    })
+}
+
 /// The greedy action of each row of `q` (`rows` × [`Action::COUNT`], row-major) into `out`
 /// (cleared first): the first maximum on ties.
 ///
@@ -127,6 +162,17 @@ pub fn greedy_actions(q: &[f32], rows: usize, out: &mut Vec<Action>) -> Result<(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn panics_become_errors_and_batches_need_their_slots() {
+        let e = catch_panic::<()>("the backend", || panic!("out of memory")).expect_err("panic");
+        assert_eq!(e, PolicyError::Backend("the backend panicked: out of memory".into()));
+        assert_eq!(catch_panic("x", || Ok(3)), Ok(3));
+        let obs = Observation::zeros();
+        assert!(check_batch(&[&obs], &[0]).is_ok());
+        let e = check_batch(&[&obs, &obs], &[0]).expect_err("short");
+        assert!(e.to_string().contains("2 observations but 1 slots"), "{e}");
+    }
 
     #[test]
     fn greedy_actions_take_the_first_maximum_and_refuse_non_finite_rows() {

@@ -335,18 +335,14 @@ impl Controller {
             let started = Instant::now();
             let (obs, actions) = (&self.obs, &mut self.actions);
             // A panicking backend is an inference error, not a dead node.
-            let decided = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                policy.act(&[obs], &[0], actions).map_err(|e| e.to_string())?;
-                actions.first().copied().ok_or_else(|| "the policy returned no action".to_string())
-            }))
-            .unwrap_or_else(|panic| {
-                let what = panic
-                    .downcast_ref::<&str>()
-                    .map(|s| (*s).to_string())
-                    .or_else(|| panic.downcast_ref::<String>().cloned())
-                    .unwrap_or_default();
-                Err(format!("the policy panicked: {what}"))
-            });
+            let decided = mdrlat_core::catch_panic("the policy", || {
+                policy.act(&[obs], &[0], actions)?;
+                actions
+                    .first()
+                    .copied()
+                    .ok_or(mdrlat_core::PolicyError::Count { expected: 1, got: 0 })
+            })
+            .map_err(|e| e.to_string());
             match decided {
                 Ok(a) => {
                     action = Some(a);

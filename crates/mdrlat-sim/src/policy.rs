@@ -4,7 +4,7 @@
 use crate::config::SimConfig;
 use crate::env::Observation;
 use crate::sensors::{DepthCamera, DepthGeometry, Laser};
-use mdrlat_core::{Action, Policy, PolicyError, Rng, Sensors, TABLE_1};
+use mdrlat_core::{Action, Policy, PolicyError, Rng, Sensors, TABLE_1, check_batch};
 
 /// The scripted policies by name (`mdrlat rollout --policy`, `mdrlat eval --policy`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -115,7 +115,7 @@ impl Policy for RandomPolicy {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
-        check_slots(batch, slots)?;
+        check_batch(batch, slots)?;
         out.clear();
         for &slot in slots {
             let a = self.stream(slot).below(Action::COUNT);
@@ -123,18 +123,6 @@ impl Policy for RandomPolicy {
         }
         Ok(())
     }
-}
-
-/// Every observation needs its slot.
-fn check_slots(batch: &[&Observation], slots: &[usize]) -> Result<(), PolicyError> {
-    if batch.len() != slots.len() {
-        return Err(PolicyError::Backend(format!(
-            "{} observations but {} slots",
-            batch.len(),
-            slots.len()
-        )));
-    }
-    Ok(())
 }
 
 /// Always the same action.
@@ -154,7 +142,7 @@ impl Policy for ConstantPolicy {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
-        check_slots(batch, slots)?;
+        check_batch(batch, slots)?;
         out.clear();
         out.resize(batch.len(), self.0);
         Ok(())
@@ -196,7 +184,7 @@ impl Policy for ReplayPolicy {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
-        check_slots(batch, slots)?;
+        check_batch(batch, slots)?;
         out.clear();
         for &slot in slots {
             let list = self.actions.get(slot).filter(|l| !l.is_empty()).ok_or_else(|| {
@@ -291,7 +279,7 @@ impl Policy for WanderPolicy {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
-        check_slots(batch, slots)?;
+        check_batch(batch, slots)?;
         out.clear();
         for obs in batch {
             let a = self.decide(obs);

@@ -6,8 +6,8 @@
 use crate::checkpoint::read_meta;
 use crate::learner::{Inputs, q_forward, read_net};
 use mdrlat_core::{
-    Action, FRAME_STACK, Observation, Policy, PolicyError, Sensors, greedy_actions,
-    normalize_depth, normalize_laser,
+    Action, FRAME_STACK, Observation, Policy, PolicyError, Sensors, catch_panic, check_batch,
+    greedy_actions, normalize_depth, normalize_laser,
 };
 use mdrlat_nn::burn::prelude::*;
 use mdrlat_nn::{QNet, QNetConfig, Variant};
@@ -195,13 +195,7 @@ impl Policy for GreedyPolicy {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
-        if batch.len() != slots.len() {
-            return Err(PolicyError::Backend(format!(
-                "{} observations but {} slots",
-                batch.len(),
-                slots.len()
-            )));
-        }
+        check_batch(batch, slots)?;
         if batch.is_empty() {
             out.clear();
             return Ok(());
@@ -230,16 +224,7 @@ impl Policy for GreedyPolicy {
             })
         };
         // A panicking backend is a failed decision, reported as one, not a crash.
-        let q = std::panic::catch_unwind(std::panic::AssertUnwindSafe(forward)).unwrap_or_else(
-            |panic| {
-                let what = panic
-                    .downcast_ref::<&str>()
-                    .map(|s| (*s).to_string())
-                    .or_else(|| panic.downcast_ref::<String>().cloned())
-                    .unwrap_or_default();
-                Err(PolicyError::Backend(format!("the network backend panicked: {what}")))
-            },
-        );
+        let q = catch_panic("the network backend", forward);
         let q: Vec<f32> = q?.concat();
         greedy_actions(&q, batch.len(), out)
     }
