@@ -182,8 +182,10 @@ pub fn evaluate(
 ) -> Result<Evaluation, TrainError> {
     let eval_error = |source| TrainError::Evaluation { step, source };
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let mut policy =
-        learner.greedy_policy(threads).map_err(|e| eval_error(RunError::Observer(e.into())))?;
+    // A thread pool that cannot start is the policy's failure, not an observer's.
+    let mut policy = learner
+        .greedy_policy(threads)
+        .map_err(|e| TrainError::Policy { step, source: PolicyError::Backend(e) })?;
     let specs: Vec<EpisodeSpec> = (0..u64::from(config.eval_episodes))
         .map(|k| EpisodeSpec { seed: Some(config.eval_seed + k), pose: None })
         .collect();
