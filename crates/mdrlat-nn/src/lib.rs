@@ -16,6 +16,7 @@
 //! ```
 //! Every convolution uses TensorFlow "SAME" padding and is followed by a ReLU.
 
+pub mod host;
 mod init;
 mod net;
 pub mod patches;

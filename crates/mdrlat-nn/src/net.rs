@@ -161,10 +161,10 @@ impl QNetConfig {
 }
 
 /// Width of the head's hidden layers.
-const HIDDEN: usize = 512;
+pub(crate) const HIDDEN: usize = 512;
 /// Bilinear fusion sizes of the paper: L_d = 128, L_l = 64, K = 512.
-const FUSION_DEPTH: usize = 128;
-const FUSION_LASER: usize = 64;
+pub(crate) const FUSION_DEPTH: usize = 128;
+pub(crate) const FUSION_LASER: usize = 64;
 const FUSION_OUT: usize = 512;
 /// (v, ω) at t−2, t−1, t.
 const VELOCITY_OUT: usize = 6;
@@ -172,9 +172,9 @@ const VELOCITY_OUT: usize = 6;
 /// The depth stream: three 2D convolutions.
 #[derive(Module, Debug)]
 pub struct DepthStream {
-    c1: Conv2d,
-    c2: Conv2d,
-    c3: Conv2d,
+    pub(crate) c1: Conv2d,
+    pub(crate) c2: Conv2d,
+    pub(crate) c3: Conv2d,
 }
 
 /// What the depth stream reads: a batch of depth stacks, or the first convolution's patches
@@ -272,9 +272,9 @@ pub fn depth_patches(
 /// The laser stream: three 1D convolutions.
 #[derive(Module, Debug)]
 pub struct LaserStream {
-    c1: Conv1d,
-    c2: Conv1d,
-    c3: Conv1d,
+    pub(crate) c1: Conv1d,
+    pub(crate) c2: Conv1d,
+    pub(crate) c3: Conv1d,
 }
 
 impl LaserStream {
@@ -291,9 +291,9 @@ impl LaserStream {
 /// Bilinear fusion (paper eqs. 7–8).
 #[derive(Module, Debug)]
 pub struct Fusion {
-    depth: Linear,
-    laser: Linear,
-    out: Linear,
+    pub(crate) depth: Linear,
+    pub(crate) laser: Linear,
+    pub(crate) out: Linear,
 }
 
 /// `vec(d lᵀ)` of paper eq. (7), batched: entry `i·L_l + j` is `d_i · l_j`, so a linear
@@ -321,8 +321,8 @@ impl Fusion {
 /// Linear → ReLU → Linear.
 #[derive(Module, Debug)]
 pub struct Head {
-    hidden: Linear,
-    out: Linear,
+    pub(crate) hidden: Linear,
+    pub(crate) out: Linear,
 }
 
 impl Head {
@@ -346,12 +346,12 @@ pub fn dueling(value: Tensor<2>, advantage: Tensor<2>) -> Tensor<2> {
 /// The network of SPEC §3, configured by [`QNetConfig`].
 #[derive(Module, Debug)]
 pub struct QNet {
-    depth: Option<DepthStream>,
-    laser: Option<LaserStream>,
-    fusion: Option<Fusion>,
-    value: Head,
-    advantage: Head,
-    velocity: Option<Head>,
+    pub(crate) depth: Option<DepthStream>,
+    pub(crate) laser: Option<LaserStream>,
+    pub(crate) fusion: Option<Fusion>,
+    pub(crate) value: Head,
+    pub(crate) advantage: Head,
+    pub(crate) velocity: Option<Head>,
 }
 
 /// Time of one network stage (see [`QNet::stage_times`]).

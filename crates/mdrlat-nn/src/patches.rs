@@ -61,15 +61,28 @@ impl PatchGeometry {
     /// # Panics
     /// If `images` does not hold `batch` images.
     pub fn extract(&self, images: &[f32], batch: usize, out: &mut Vec<f32>) {
-        let (c, h, w) = (self.channels, self.rows, self.cols);
-        assert_eq!(images.len(), batch * c * h * w, "patch input size");
         out.clear();
         out.resize(batch * self.positions() * self.patch_len(), 0.0);
+        self.extract_into(images, batch, out);
+    }
+
+    /// [`PatchGeometry::extract`] into a slice of exactly `batch` images' patches (any
+    /// contents: every value is written).
+    ///
+    /// # Panics
+    /// If `images` does not hold `batch` images or `out` their patches.
+    pub fn extract_into(&self, images: &[f32], batch: usize, out: &mut [f32]) {
+        let (c, h, w) = (self.channels, self.rows, self.cols);
+        assert_eq!(images.len(), batch * c * h * w, "patch input size");
         let per_image = (self.positions() * self.patch_len()).max(1);
+        assert_eq!(out.len(), batch * self.positions() * self.patch_len(), "patch output size");
         // One image per work item: a batch of 32 is 23 MB of patches, two cores' work.
-        out.par_chunks_mut(per_image)
-            .zip(images.par_chunks((c * h * w).max(1)))
-            .for_each(|(out, image)| self.extract_one(image, out));
+        out.par_chunks_mut(per_image).zip(images.par_chunks((c * h * w).max(1))).for_each(
+            |(out, image)| {
+                out.fill(0.0);
+                self.extract_one(image, out);
+            },
+        );
     }
 
     /// The patches of one `[channels, rows, cols]` image into `out` (zeroed, one image's

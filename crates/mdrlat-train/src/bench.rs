@@ -211,8 +211,10 @@ pub fn profile(
     // Per stage: forward and backward samples.
     let mut stages: Vec<(&'static str, Vec<f64>, Vec<f64>)> = Vec::new();
     let start = Instant::now();
+    let stage_times =
+        |learner: &Learner| learner.host_stage_times(&b).unwrap_or_else(|| learner.stage_times(&b));
     while start.elapsed() < min_time || stages.first().is_none_or(|s| s.1.len() < 3) {
-        for (i, st) in learner.stage_times(&b).into_iter().enumerate() {
+        for (i, st) in stage_times(&learner).into_iter().enumerate() {
             if stages.len() <= i {
                 stages.push((st.name, Vec::new(), Vec::new()));
             }

@@ -12,6 +12,7 @@ use mdrlat_nn::burn::module::Module;
 use mdrlat_nn::burn::optim::{GradientsParams, ModuleOptimizer};
 use mdrlat_nn::burn::prelude::*;
 use mdrlat_nn::burn::store::{BurnpackStore, ModuleSnapshot};
+use mdrlat_nn::host::{HostGrad, HostInputs, HostNet};
 use mdrlat_nn::{QNet, QNetConfig, Variant};
 use std::path::Path;
 use std::sync::Arc;
@@ -36,6 +37,34 @@ pub struct Inputs {
     pub laser: Vec<f32>,
     /// `[B, 4, 128, 160]` normalised depth (empty when unused).
     pub depth: Vec<f32>,
+}
+
+impl Inputs {
+    /// The same rows for the host kernels.
+    pub(crate) fn host(&self) -> HostInputs<'_> {
+        HostInputs { batch: self.size, laser: &self.laser, depth: &self.depth, goal: &[] }
+    }
+}
+
+/// The observations `s` (`next`: `s'`) of a batch for the host kernels.
+fn batch_inputs(batch: &Batch, next: bool) -> HostInputs<'_> {
+    let (laser, depth) =
+        if next { (&batch.next_laser, &batch.next_depth) } else { (&batch.laser, &batch.depth) };
+    HostInputs { batch: batch.size, laser, depth, goal: &[] }
+}
+
+/// Eq. (10) on host rows: `y = r + (1 − terminated) · Q⁻(s', argmax_a' Q(s', a')) · γ`, in
+/// burn's order of operations; ties go to the first action.
+fn host_targets(online_next: &[f32], target_next: &[f32], batch: &Batch, gamma: f32) -> Vec<f32> {
+    let actions = online_next.len() / batch.size.max(1);
+    (0..batch.size)
+        .map(|i| {
+            let row = &online_next[i * actions..(i + 1) * actions];
+            let best = (0..actions).fold(0, |best, a| if row[a] > row[best] { a } else { best });
+            let q_next = target_next[i * actions + best];
+            batch.rewards[i] + ((1.0 - batch.terminated[i]) * q_next) * gamma
+        })
+        .collect()
 }
 
 /// The online network, its target copy and the optimiser.
@@ -63,6 +92,9 @@ pub struct Learner {
     /// core idle in its single-threaded stretches (MDRLAT step 130 → 110 ms on 2 cores);
     /// LibTorch already spreads every kernel over all cores and only oversubscribes.
     side_by_side: bool,
+    /// Gradient steps on the host kernels where the backend allows (see
+    /// [`Learner::uses_host_kernels`]).
+    host_kernels: bool,
 }
 
 impl std::fmt::Debug for Learner {
@@ -111,6 +143,9 @@ pub(crate) fn q_forward(
     }
     if b == 0 {
         return Ok(Vec::new());
+    }
+    if let Some(host) = net.host(&QNetConfig::new(variant)) {
+        return Ok(host.q_values(&inputs.host()));
     }
     let l = variant.uses_laser().then(|| tensor3(&inputs.laser, b, device));
     let d = variant.uses_depth().then(|| tensor4(&inputs.depth, b, device));
@@ -161,6 +196,17 @@ fn in_name_order(path: &Path) -> Result<(), String> {
     writer.write_to_file(path).map_err(|e| e.to_string())
 }
 
+/// Hands a host gradient to burn's optimiser, as a tensor of its parameter's rank.
+fn register(grads: &mut GradientsParams, g: HostGrad, device: &Device) {
+    let id = g.id;
+    match g.dims.len() {
+        1 => grads.register::<1>(id, g.into_tensor(device)),
+        2 => grads.register::<2>(id, g.into_tensor(device)),
+        3 => grads.register::<3>(id, g.into_tensor(device)),
+        _ => grads.register::<4>(id, g.into_tensor(device)),
+    }
+}
+
 impl Learner {
     /// A fresh learner: the network is initialised from `seed` on `device`, the target is a
     /// copy (Algorithm 1, line 1).
@@ -189,6 +235,7 @@ impl Learner {
             updates: 0,
             phase_ms: [0.0; 3],
             side_by_side,
+            host_kernels: true,
         }
     }
 
@@ -273,11 +320,41 @@ impl Learner {
     /// The TD targets `y` of a batch (eq. 10), for tests and diagnostics.
     #[doc(alias = "eq10")]
     pub fn td_targets(&self, batch: &Batch) -> Vec<f32> {
+        if let Some((online, target)) = self.host_nets() {
+            let next = batch_inputs(batch, true);
+            let (qo, qt) = rayon::join(|| online.q_values(&next), || target.q_values(&next));
+            return host_targets(&qo, &qt, batch, self.gamma);
+        }
         self.targets(batch).into_data().try_to_vec::<f32>().unwrap_or_default()
+    }
+
+    /// The online (autodiff-free copy) and target networks for the host kernels, on `flex`
+    /// unless they are switched off.
+    fn host_nets(&self) -> Option<(HostNet, HostNet)> {
+        if !self.host_kernels {
+            return None;
+        }
+        let config = QNetConfig::new(self.variant);
+        Some((self.plain.host(&config)?, self.target.host(&config)?))
+    }
+
+    /// Whether gradient steps run on the host kernels (`mdrlat_nn::host`): on `flex`, unless
+    /// switched off with [`Learner::set_host_kernels`].
+    pub fn uses_host_kernels(&self) -> bool {
+        self.host_nets().is_some()
+    }
+
+    /// Switches the host kernels off (burn's autodiff computes the gradients, as on every
+    /// other backend) or back on: for benchmarks and tests that compare the two.
+    pub fn set_host_kernels(&mut self, on: bool) {
+        self.host_kernels = on;
     }
 
     /// Q⁻(s', a) of the target network for every action, `[B][actions]` row-major.
     pub fn target_q_next(&self, batch: &Batch) -> Vec<f32> {
+        if let Some((_, target)) = self.host_nets() {
+            return target.q_values(&batch_inputs(batch, true));
+        }
         let (nl, nd) = self.inputs::<false>(&batch.next_laser, &batch.next_depth, batch.size);
         self.target.q_values(nl, nd, None).into_data().try_to_vec::<f32>().unwrap_or_default()
     }
@@ -340,6 +417,9 @@ impl Learner {
     /// graph is dropped on return, so the graph holds no parameter any more. The instant is
     /// the end of the forward phase.
     fn gradients(&self, batch: &Batch) -> (GradientsParams, Losses, std::time::Instant) {
+        if let Some((online, target)) = self.host_nets() {
+            return self.host_gradients(&online, &target, batch);
+        }
         let b = batch.size;
         let (y, out) = self.targets_and_forward(batch);
         let y = Tensor::<2>::from_data(y.into_data(), &self.train_device);
@@ -370,6 +450,65 @@ impl Learner {
         };
         let grads = GradientsParams::from_grads(loss.backward(), &self.online);
         (grads, Losses { td: td_value, at: at_value, q_mean }, t1)
+    }
+
+    /// [`Learner::gradients`] on the host kernels: the two eq. (10) forwards on `s'` beside
+    /// the online forward on `s`, then the losses and their gradients on the host, and one
+    /// hand-written backward pass (tested equal to burn's autodiff in `mdrlat_nn::host`).
+    fn host_gradients(
+        &self,
+        online: &HostNet,
+        target: &HostNet,
+        batch: &Batch,
+    ) -> (GradientsParams, Losses, std::time::Instant) {
+        let b = batch.size;
+        let aux = self.variant.auxiliary_task();
+        let (next, now) = (batch_inputs(batch, true), batch_inputs(batch, false));
+        // One online pass over s and s' stacked (its weights read once for both; the loss
+        // reaches only the s rows), beside the target network's pass over s'.
+        let (tape, target_next) = rayon::join(
+            || online.forward_parts(&[now, next], if aux { b } else { 0 }),
+            || target.q_values(&next),
+        );
+        let actions = tape.q().len() / (2 * b).max(1);
+        let y = host_targets(&tape.q()[b * actions..], &target_next, batch, self.gamma);
+        let t1 = std::time::Instant::now();
+        // Eq. (13): mean over the batch of (y − Q(s, a))²; its gradient reaches Q(s, a) only.
+        let mut dq = vec![0.0f32; b * actions];
+        let (mut td, mut q_sum) = (0.0f32, 0.0f32);
+        for i in 0..b {
+            let a = usize::try_from(batch.actions[i]).unwrap_or(0).min(actions - 1);
+            let q_sa = tape.q()[i * actions + a];
+            let err = y[i] - q_sa;
+            td += err * err;
+            q_sum += q_sa;
+            dq[i * actions + a] = -2.0 * err / b as f32;
+        }
+        let (td, q_mean) = (td / b as f32, q_sum / b as f32);
+        // Eq. (12): mean over the batch of Σ_j (v_j − ṽ_j)², weighted into the loss.
+        let (at, dvel) = if aux {
+            let (est, n) = (tape.velocity(), 2 * ODOM_HISTORY);
+            let mut at = 0.0f32;
+            let mut dvel = vec![0.0f32; b * n];
+            for i in 0..b {
+                let mut row = 0.0f32;
+                for j in 0..n {
+                    let err = batch.odom[i * n + j] - est[i * n + j];
+                    row += err * err;
+                    dvel[i * n + j] = -2.0 * self.aux_weight * err / b as f32;
+                }
+                at += row;
+            }
+            (at / b as f32, Some(dvel))
+        } else {
+            (0.0, None)
+        };
+        let host_grads = online.backward(&tape, &dq, dvel.as_deref());
+        let mut grads = GradientsParams::new();
+        for g in host_grads {
+            register(&mut grads, g, &self.device);
+        }
+        (grads, Losses { td, at, q_mean }, t1)
     }
 
     /// Saves the online and target weights and the Adam moments into `dir` (burnpack files,
@@ -422,6 +561,24 @@ impl Learner {
     pub fn stage_times(&self, batch: &Batch) -> Vec<mdrlat_nn::StageTime> {
         let (l, d) = self.inputs::<true>(&batch.laser, &batch.depth, batch.size);
         self.online.stage_times(l, d, true)
+    }
+
+    /// On the host kernels: each stage's forward and backward milliseconds of one pass of
+    /// the online network over `batch` (as in a gradient step: the auxiliary head included,
+    /// unit loss gradients), in forward order; `None` off the host kernels.
+    pub fn host_stage_times(&self, batch: &Batch) -> Option<Vec<mdrlat_nn::StageTime>> {
+        let (online, _) = self.host_nets()?;
+        let aux = self.variant.auxiliary_task();
+        let tape = online.forward(&batch_inputs(batch, false), aux);
+        let dq = vec![1.0 / batch.size.max(1) as f32; tape.q().len()];
+        let dvel = aux.then(|| vec![1.0; tape.velocity().len()]);
+        let (_, backward) = online.backward_timed(&tape, &dq, dvel.as_deref());
+        let stages = tape.times.stages.iter().map(|&(name, forward_ms)| {
+            let backward_ms =
+                backward.stages.iter().filter(|(b, _)| *b == name).map(|(_, ms)| ms).sum::<f64>();
+            mdrlat_nn::StageTime { name, forward_ms, backward_ms: Some(backward_ms) }
+        });
+        Some(stages.collect())
     }
 
     /// The online network without autodiff (for evaluation and export).

@@ -1,0 +1,237 @@
+//! SAME-padded convolutions on channel-last (`[B, H, W, C]`) activations as matrix products:
+//! patches ("im2col") ordered kernel row, kernel column, channel, and the convolution weight
+//! `[out, in, kh, kw]` permuted to `[out, kh, kw, in]` to match. A 1D convolution is the
+//! `H = 1` case.
+
+use super::gemm::{Mat, gemm};
+
+/// Geometry of one convolution layer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct ConvGeometry {
+    /// Input rows, columns and channels.
+    pub(crate) h: usize,
+    pub(crate) w: usize,
+    pub(crate) c: usize,
+    /// Kernel rows and columns.
+    pub(crate) kh: usize,
+    pub(crate) kw: usize,
+    /// Stride (both axes).
+    pub(crate) stride: usize,
+    /// Output channels.
+    pub(crate) out_channels: usize,
+}
+
+impl ConvGeometry {
+    /// Output rows and columns (TensorFlow SAME: `ceil(in / stride)`).
+    pub(crate) fn out(&self) -> [usize; 2] {
+        [self.h.div_ceil(self.stride), self.w.div_ceil(self.stride)]
+    }
+
+    /// Output positions per image.
+    pub(crate) fn positions(&self) -> usize {
+        let [oh, ow] = self.out();
+        oh * ow
+    }
+
+    /// Values per patch.
+    pub(crate) fn patch_len(&self) -> usize {
+        self.kh * self.kw * self.c
+    }
+
+    /// Padding before the first row and column (the odd pixel goes after, as in TensorFlow
+    /// and burn's `Same`).
+    fn pad_before(&self) -> [usize; 2] {
+        let [oh, ow] = self.out();
+        let total =
+            |out: usize, k: usize, len: usize| ((out - 1) * self.stride + k).saturating_sub(len);
+        [total(oh, self.kh, self.h) / 2, total(ow, self.kw, self.w) / 2]
+    }
+
+    /// For output position `(y, x)` and kernel row `ky`: the input row, and the kernel
+    /// columns `lo..hi` that land inside the image with the input column of `lo`.
+    fn span(&self, y: usize, x: usize, ky: usize) -> Option<(usize, usize, usize, usize)> {
+        let [pt, pl] = self.pad_before();
+        let iy = (y * self.stride + ky).checked_sub(pt).filter(|&iy| iy < self.h)?;
+        let x0 = (x * self.stride) as isize - pl as isize;
+        let lo = (-x0).max(0) as usize;
+        let hi = ((self.w as isize - x0).max(0) as usize).min(self.kw);
+        (lo < hi).then(|| (iy, lo, hi, (x0 + lo as isize) as usize))
+    }
+
+    /// The patches of `batch` channel-last images into `cols`, `[B·positions, patch_len]`;
+    /// padding reads 0.
+    pub(crate) fn im2col(&self, x: &[f32], batch: usize, cols: &mut Vec<f32>) {
+        let (k, image) = (self.patch_len(), self.h * self.w * self.c);
+        debug_assert_eq!(x.len(), batch * image);
+        cols.clear();
+        cols.resize(batch * self.positions() * k, 0.0);
+        let [oh, ow] = self.out();
+        let c = self.c;
+        for b in 0..batch {
+            let img = &x[b * image..(b + 1) * image];
+            for y in 0..oh {
+                for xo in 0..ow {
+                    let row = ((b * oh + y) * ow + xo) * k;
+                    for ky in 0..self.kh {
+                        if let Some((iy, lo, hi, ix)) = self.span(y, xo, ky) {
+                            let src = (iy * self.w + ix) * c;
+                            let dst = row + (ky * self.kw + lo) * c;
+                            let len = (hi - lo) * c;
+                            cols[dst..dst + len].copy_from_slice(&img[src..src + len]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The adjoint of [`ConvGeometry::im2col`]: adds each patch value back onto the input
+    /// position it was read from. `dx` is overwritten, `[B, H, W, C]`.
+    pub(crate) fn col2im(&self, dcols: &[f32], batch: usize, dx: &mut Vec<f32>) {
+        let (k, image) = (self.patch_len(), self.h * self.w * self.c);
+        dx.clear();
+        dx.resize(batch * image, 0.0);
+        let [oh, ow] = self.out();
+        let c = self.c;
+        for b in 0..batch {
+            let img = &mut dx[b * image..(b + 1) * image];
+            for y in 0..oh {
+                for xo in 0..ow {
+                    let row = ((b * oh + y) * ow + xo) * k;
+                    for ky in 0..self.kh {
+                        if let Some((iy, lo, hi, ix)) = self.span(y, xo, ky) {
+                            let dst = (iy * self.w + ix) * c;
+                            let src = row + (ky * self.kw + lo) * c;
+                            let len = (hi - lo) * c;
+                            for (d, s) in img[dst..dst + len].iter_mut().zip(&dcols[src..src + len])
+                            {
+                                *d += s;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// A convolution weight `[out, in, kh, kw]` as `[out, kh, kw, in]`, the patches' order.
+    pub(crate) fn permute_weight(&self, w: &[f32]) -> Vec<f32> {
+        let (c, kk) = (self.c, self.kh * self.kw);
+        let mut out = vec![0.0; w.len()];
+        for o in 0..self.out_channels {
+            for ch in 0..c {
+                for p in 0..kk {
+                    out[(o * kk + p) * c + ch] = w[(o * c + ch) * kk + p];
+                }
+            }
+        }
+        out
+    }
+
+    /// The inverse of [`ConvGeometry::permute_weight`] (for weight gradients).
+    pub(crate) fn unpermute_weight(&self, wp: &[f32]) -> Vec<f32> {
+        let (c, kk) = (self.c, self.kh * self.kw);
+        let mut out = vec![0.0; wp.len()];
+        for o in 0..self.out_channels {
+            for ch in 0..c {
+                for p in 0..kk {
+                    out[(o * c + ch) * kk + p] = wp[(o * kk + p) * c + ch];
+                }
+            }
+        }
+        out
+    }
+}
+
+/// `y = relu(cols · wᵀ + bias)`, `[rows, out]`, for patches `cols` (`[rows, k]`) and a weight
+/// `w` (`[out, k]`).
+pub(crate) fn patch_product_relu(cols: &[f32], w: &[f32], bias: &[f32], rows: usize) -> Vec<f32> {
+    let out = bias.len();
+    let k = w.len() / out.max(1);
+    let mut y = bias.repeat(rows);
+    gemm(rows, out, k, Mat::n(cols), Mat::t(w), &mut y, true);
+    relu_in_place(&mut y);
+    y
+}
+
+/// Gradients of a patch product (see [`patch_product_relu`]) from `dy` (`[rows, out]`,
+/// already through the ReLU): the weight's `[out, k]` and the bias's, and with `dcols` the
+/// patches' (`[rows, k]`).
+pub(crate) fn patch_product_backward(
+    cols: &[f32],
+    w: &[f32],
+    dy: &[f32],
+    rows: usize,
+    dcols: Option<&mut Vec<f32>>,
+) -> (Vec<f32>, Vec<f32>) {
+    let out = dy.len() / rows.max(1);
+    let k = w.len() / out.max(1);
+    let mut dw = vec![0.0; out * k];
+    gemm(out, k, rows, Mat::t(dy), Mat::n(cols), &mut dw, false);
+    if let Some(dcols) = dcols {
+        dcols.clear();
+        dcols.resize(rows * k, 0.0);
+        gemm(rows, k, out, Mat::n(dy), Mat::n(w), dcols, false);
+    }
+    (dw, column_sums(dy, out))
+}
+
+/// Sums of the columns of a row-major matrix with `cols` columns.
+pub(crate) fn column_sums(m: &[f32], cols: usize) -> Vec<f32> {
+    let mut s = vec![0.0f32; cols];
+    for row in m.chunks_exact(cols.max(1)) {
+        for (s, v) in s.iter_mut().zip(row) {
+            *s += v;
+        }
+    }
+    s
+}
+
+/// `max(x, 0)` in place.
+pub(crate) fn relu_in_place(x: &mut [f32]) {
+    for v in x {
+        *v = v.max(0.0);
+    }
+}
+
+/// Zeroes the gradient where the ReLU's output was 0 (the ReLU passed nothing back).
+pub(crate) fn relu_backward(dy: &mut [f32], y: &[f32]) {
+    for (d, &y) in dy.iter_mut().zip(y) {
+        if y <= 0.0 {
+            *d = 0.0;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// col2im is the adjoint of im2col: <im2col(x), c> = <x, col2im(c)>.
+    #[test]
+    fn col2im_is_the_adjoint_of_im2col() {
+        for g in [
+            ConvGeometry { h: 5, w: 7, c: 3, kh: 3, kw: 4, stride: 2, out_channels: 2 },
+            ConvGeometry { h: 1, w: 9, c: 2, kh: 1, kw: 3, stride: 2, out_channels: 2 },
+        ] {
+            let x: Vec<f32> = (0..2 * g.h * g.w * g.c).map(|v| (v % 7) as f32 - 3.0).collect();
+            let mut cols = Vec::new();
+            g.im2col(&x, 2, &mut cols);
+            let c: Vec<f32> = (0..cols.len()).map(|v| (v % 5) as f32 * 0.5).collect();
+            let mut back = Vec::new();
+            g.col2im(&c, 2, &mut back);
+            let lhs: f32 = cols.iter().zip(&c).map(|(a, b)| a * b).sum();
+            let rhs: f32 = x.iter().zip(&back).map(|(a, b)| a * b).sum();
+            assert!((lhs - rhs).abs() < 1e-3, "{lhs} vs {rhs}");
+        }
+    }
+
+    #[test]
+    fn weight_permutation_round_trips() {
+        let g = ConvGeometry { h: 4, w: 4, c: 3, kh: 2, kw: 3, stride: 1, out_channels: 5 };
+        let w: Vec<f32> = (0..5 * 3 * 2 * 3).map(|v| v as f32).collect();
+        let p = g.permute_weight(&w);
+        assert_ne!(p, w);
+        assert_eq!(g.unpermute_weight(&p), w);
+    }
+}

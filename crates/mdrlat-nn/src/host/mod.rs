@@ -1,0 +1,830 @@
+//! The network's forward and backward passes in host memory, for burn's `flex` CPU backend.
+//!
+//! burn's autodiff on `flex` ran an MDRLAT gradient step at 0.15–0.25 of the machine's own
+//! GEMM rate: every operation allocates, element-wise passes are single-threaded, the
+//! convolutions are not matrix products, and the graph is recorded for forwards that are never
+//! differentiated. On the CPU the whole pass is a chain of matrix products, so these kernels
+//! compute it directly on the weights' own memory (no copy): each convolution is a product
+//! of patches with its weight, each linear layer one product, the backward pass the
+//! transposed products, written out by hand and tested against burn's autodiff for every
+//! variant (`tests` below). The network, its parameters, their ids and the optimiser are
+//! still burn's — [`HostNet`] only reads the weights of a [`QNet`] and returns gradients
+//! keyed by parameter id — so checkpoints, exports and every other backend are unchanged.
+
+pub(crate) mod conv;
+pub(crate) mod gemm;
+
+use crate::net::{QNet, QNetConfig};
+use crate::patches::PatchGeometry;
+use burn::backend::{BackendTensor, DispatchTensor, DispatchTensorKind};
+use burn::module::{Param, ParamId};
+use burn::prelude::*;
+use burn::tensor::DType;
+use conv::{
+    ConvGeometry, column_sums, patch_product_backward, patch_product_relu, relu_backward,
+    relu_in_place,
+};
+use gemm::{Mat, gemm};
+use rayon::prelude::*;
+
+/// Width of the heads' hidden layers, and the bilinear fusion's `L_d`, `L_l`.
+use crate::net::{FUSION_DEPTH as FUSION_D, FUSION_LASER as FUSION_L, HIDDEN};
+
+/// Row-wise concatenation of `pieces` (each `[b, width_i]`) into `[b, width]`.
+fn concat_columns(pieces: &[(&[f32], usize)], b: usize, width: usize) -> Vec<f32> {
+    let mut out = vec![0.0; b * width];
+    let mut offset = 0;
+    for &(piece, w) in pieces {
+        for r in 0..b {
+            out[r * width + offset..r * width + offset + w]
+                .copy_from_slice(&piece[r * w..(r + 1) * w]);
+        }
+        offset += w;
+    }
+    debug_assert_eq!(offset, width);
+    out
+}
+
+/// The `f32` elements of a `flex` tensor, when they are one contiguous host slice.
+pub fn flex_f32(kind: &DispatchTensorKind) -> Option<&[f32]> {
+    match kind {
+        DispatchTensorKind::Flex(BackendTensor::Float(t)) if t.dtype() == DType::F32 => {
+            let (start, end) = t.layout().contiguous_offsets()?;
+            t.storage::<f32>().get(start..end)
+        }
+        _ => None,
+    }
+}
+
+/// One parameter, held (shared, not copied) for reading.
+struct HostTensor {
+    id: ParamId,
+    dims: Vec<usize>,
+    tensor: DispatchTensor,
+}
+
+impl HostTensor {
+    fn new<const D: usize>(param: &Param<Tensor<D>>) -> Option<Self> {
+        let tensor = param.val().inner();
+        let dims = tensor.dims().to_vec();
+        let tensor = tensor.into_dispatch();
+        let len = flex_f32(&tensor.kind)?.len();
+        (len == dims.iter().product::<usize>()).then_some(Self { id: param.id, dims, tensor })
+    }
+
+    fn data(&self) -> &[f32] {
+        flex_f32(&self.tensor.kind).unwrap_or(&[])
+    }
+}
+
+/// A linear layer's weight (`[in, out]`, burn's layout) and bias.
+struct HostLinear {
+    weight: HostTensor,
+    bias: HostTensor,
+}
+
+impl HostLinear {
+    fn new(l: &burn::nn::Linear) -> Option<Self> {
+        Some(Self { weight: HostTensor::new(&l.weight)?, bias: HostTensor::new(l.bias.as_ref()?)? })
+    }
+
+    fn dims(&self) -> (usize, usize) {
+        (self.weight.dims[0], self.weight.dims[1])
+    }
+
+    /// `x · W + b`, `[batch, out]`.
+    fn forward(&self, x: &[f32], batch: usize) -> Vec<f32> {
+        let (din, dout) = self.dims();
+        let mut y = self.bias.data().repeat(batch);
+        gemm(batch, dout, din, Mat::n(x), Mat::n(self.weight.data()), &mut y, true);
+        y
+    }
+
+    /// Gradients of the weight and bias from `dy`; with `dx`, adds (`accumulate`) or
+    /// writes the input gradient `dy · Wᵀ`.
+    fn backward(
+        &self,
+        x: &[f32],
+        dy: &[f32],
+        batch: usize,
+        dx: Option<(&mut [f32], bool)>,
+        grads: &mut Vec<HostGrad>,
+    ) {
+        let (din, dout) = self.dims();
+        let mut dw = vec![0.0; din * dout];
+        gemm(din, dout, batch, Mat::t(x), Mat::n(dy), &mut dw, false);
+        if let Some((dx, accumulate)) = dx {
+            gemm(batch, din, dout, Mat::n(dy), Mat::t(self.weight.data()), dx, accumulate);
+        }
+        grads.push(HostGrad::of(&self.weight, dw));
+        grads.push(HostGrad::of(&self.bias, column_sums(dy, dout)));
+    }
+}
+
+/// A convolution's weight (`[out, in, kh, kw]` or `[out, in, k]`) and bias.
+struct HostConv {
+    weight: HostTensor,
+    bias: HostTensor,
+    geometry: ConvGeometry,
+}
+
+impl HostConv {
+    fn new<const D: usize>(
+        weight: &Param<Tensor<D>>,
+        bias: Option<&Param<Tensor<1>>>,
+        geometry: ConvGeometry,
+    ) -> Option<Self> {
+        let (weight, bias) = (HostTensor::new(weight)?, HostTensor::new(bias?)?);
+        let expected = geometry.out_channels * geometry.patch_len();
+        (weight.data().len() == expected).then_some(Self { weight, bias, geometry })
+    }
+}
+
+/// A gradient, in the parameter's own layout, for the parameter with `id`.
+#[derive(Debug, Clone)]
+pub struct HostGrad {
+    /// The parameter.
+    pub id: ParamId,
+    /// Its shape.
+    pub dims: Vec<usize>,
+    /// `∂loss/∂parameter`, row-major.
+    pub values: Vec<f32>,
+}
+
+impl HostGrad {
+    fn of(t: &HostTensor, values: Vec<f32>) -> Self {
+        Self { id: t.id, dims: t.dims.clone(), values }
+    }
+
+    /// As a tensor on `device` (for burn's optimiser).
+    pub fn into_tensor<const D: usize>(self, device: &Device) -> Tensor<D> {
+        Tensor::from_data(TensorData::new(self.values, self.dims), device)
+    }
+}
+
+/// Network inputs of a batch, normalised, in the network's layout.
+#[derive(Debug, Clone, Copy)]
+pub struct HostInputs<'a> {
+    /// Rows.
+    pub batch: usize,
+    /// `[B, frames, beams]` laser stacks (empty when the variant has no laser).
+    pub laser: &'a [f32],
+    /// `[B, frames, rows, cols]` depth stacks (empty when the variant has no depth camera).
+    pub depth: &'a [f32],
+    /// `[B, goal_dim]` goal vectors (empty without a goal input).
+    pub goal: &'a [f32],
+}
+
+/// Milliseconds of named stages, in order (see [`Tape::times`]).
+#[derive(Debug, Default, Clone)]
+pub struct StageClock {
+    last: Option<std::time::Instant>,
+    /// Each stage and its milliseconds.
+    pub stages: Vec<(&'static str, f64)>,
+}
+
+impl StageClock {
+    fn start() -> Self {
+        Self { last: Some(std::time::Instant::now()), stages: Vec::new() }
+    }
+
+    /// Ends the current stage as `name` and starts the next.
+    fn lap(&mut self, name: &'static str) {
+        let now = std::time::Instant::now();
+        if let Some(last) = self.last {
+            self.stages.push((name, (now - last).as_secs_f64() * 1e3));
+        }
+        self.last = Some(now);
+    }
+}
+
+/// What a forward pass keeps for its backward pass.
+#[derive(Debug, Default)]
+pub struct Tape {
+    /// Time of each forward stage.
+    pub times: StageClock,
+    batch: usize,
+    /// Depth: conv1 patches, and each layer's output (channel-last) and the next layer's
+    /// patches.
+    depth_patches: Vec<f32>,
+    depth_act: [Vec<f32>; 3],
+    depth_cols: [Vec<f32>; 2],
+    /// Laser: the three layers' patches and outputs (channel-last).
+    laser_cols: [Vec<f32>; 3],
+    laser_act: [Vec<f32>; 3],
+    /// Bilinear fusion: d, l, vec(d lᵀ) and the fusion output.
+    fusion: [Vec<f32>; 4],
+    /// The representation `h`, `[B, h]`.
+    h: Vec<f32>,
+    /// Hidden activations of the value, advantage and (with the auxiliary task) velocity
+    /// heads.
+    hidden: Vec<Vec<f32>>,
+    /// Q-values, `[B, actions]`.
+    q: Vec<f32>,
+    /// Velocity estimates, `[velocity_rows, 6]` (empty without the auxiliary head).
+    velocity: Vec<f32>,
+    /// Rows the auxiliary head ran on (the first ones).
+    velocity_rows: usize,
+}
+
+impl Tape {
+    /// Q-values, `[B, actions]` row-major.
+    pub fn q(&self) -> &[f32] {
+        &self.q
+    }
+
+    /// The auxiliary head's `(v, ω)` estimates, `[B, 6]` (empty without it).
+    pub fn velocity(&self) -> &[f32] {
+        &self.velocity
+    }
+}
+
+/// A [`QNet`]'s weights, read in place, with forward and backward passes on the host.
+pub struct HostNet {
+    config: QNetConfig,
+    depth: Option<[HostConv; 3]>,
+    laser: Option<[HostConv; 3]>,
+    fusion: Option<[HostLinear; 3]>,
+    /// value, advantage, velocity: hidden and output layers.
+    heads: Vec<[HostLinear; 2]>,
+}
+
+impl std::fmt::Debug for HostNet {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("HostNet").field("variant", &self.config.variant).finish()
+    }
+}
+
+/// `[B, C, L]` → `[B, L, C]` (a transpose per image).
+fn channels_last(x: &[f32], batch: usize, c: usize, l: usize) -> Vec<f32> {
+    let mut out = vec![0.0; x.len()];
+    for b in 0..batch {
+        for ch in 0..c {
+            for p in 0..l {
+                out[(b * l + p) * c + ch] = x[(b * c + ch) * l + p];
+            }
+        }
+    }
+    out
+}
+
+/// Channel-last `[B, P, C]` activations flattened like burn's `[B, C, P]` (`c·P + p`), into
+/// columns `offset..` of rows of `width`.
+fn flatten_into(
+    x: &[f32],
+    batch: usize,
+    p: usize,
+    c: usize,
+    out: &mut [f32],
+    width: usize,
+    offset: usize,
+) {
+    for b in 0..batch {
+        let row = &mut out[b * width + offset..b * width + offset + c * p];
+        for pos in 0..p {
+            for ch in 0..c {
+                row[ch * p + pos] = x[(b * p + pos) * c + ch];
+            }
+        }
+    }
+}
+
+/// The adjoint of [`flatten_into`]: columns `offset..` of `dh` back to channel-last.
+fn unflatten(
+    dh: &[f32],
+    batch: usize,
+    p: usize,
+    c: usize,
+    width: usize,
+    offset: usize,
+) -> Vec<f32> {
+    let mut out = vec![0.0; batch * p * c];
+    for b in 0..batch {
+        let row = &dh[b * width + offset..b * width + offset + c * p];
+        for pos in 0..p {
+            for ch in 0..c {
+                out[(b * p + pos) * c + ch] = row[ch * p + pos];
+            }
+        }
+    }
+    out
+}
+
+/// Columns `offset..offset + n` of each row of `m` (`width` wide).
+fn columns(m: &[f32], batch: usize, width: usize, offset: usize, n: usize) -> Vec<f32> {
+    (0..batch).flat_map(|b| m[b * width + offset..b * width + offset + n].iter().copied()).collect()
+}
+
+impl HostNet {
+    /// Reads the weights of `net` (a `config` network), or `None` where they do not all lie
+    /// in host memory as contiguous `f32` (any backend but `flex`).
+    pub(crate) fn new(net: &QNet, config: &QNetConfig) -> Option<Self> {
+        let f = config.frames;
+        let depth = match &net.depth {
+            Some(s) => {
+                let g1 = PatchGeometry::depth_conv1(f, config.depth_rows, config.depth_cols);
+                let [r1, c1] = g1.out();
+                let c1g = ConvGeometry {
+                    h: config.depth_rows,
+                    w: config.depth_cols,
+                    c: f,
+                    kh: 10,
+                    kw: 14,
+                    stride: 8,
+                    out_channels: 16,
+                };
+                let c2g =
+                    ConvGeometry { h: r1, w: c1, c: 16, kh: 4, kw: 4, stride: 2, out_channels: 32 };
+                let [r2, c2] = c2g.out();
+                let c3g =
+                    ConvGeometry { h: r2, w: c2, c: 32, kh: 3, kw: 3, stride: 1, out_channels: 32 };
+                Some([
+                    HostConv::new(&s.c1.weight, s.c1.bias.as_ref(), c1g)?,
+                    HostConv::new(&s.c2.weight, s.c2.bias.as_ref(), c2g)?,
+                    HostConv::new(&s.c3.weight, s.c3.bias.as_ref(), c3g)?,
+                ])
+            }
+            None => None,
+        };
+        let laser = match &net.laser {
+            Some(s) => {
+                let g1 = ConvGeometry {
+                    h: 1,
+                    w: config.beams,
+                    c: f,
+                    kh: 1,
+                    kw: 5,
+                    stride: 4,
+                    out_channels: 16,
+                };
+                let g2 = ConvGeometry {
+                    h: 1,
+                    w: g1.out()[1],
+                    c: 16,
+                    kh: 1,
+                    kw: 3,
+                    stride: 2,
+                    out_channels: 32,
+                };
+                let g3 = ConvGeometry {
+                    h: 1,
+                    w: g2.out()[1],
+                    c: 32,
+                    kh: 1,
+                    kw: 3,
+                    stride: 2,
+                    out_channels: 32,
+                };
+                Some([
+                    HostConv::new(&s.c1.weight, s.c1.bias.as_ref(), g1)?,
+                    HostConv::new(&s.c2.weight, s.c2.bias.as_ref(), g2)?,
+                    HostConv::new(&s.c3.weight, s.c3.bias.as_ref(), g3)?,
+                ])
+            }
+            None => None,
+        };
+        let fusion = match &net.fusion {
+            Some(fu) => Some([
+                HostLinear::new(&fu.depth)?,
+                HostLinear::new(&fu.laser)?,
+                HostLinear::new(&fu.out)?,
+            ]),
+            None => None,
+        };
+        let head =
+            |h: &crate::net::Head| Some([HostLinear::new(&h.hidden)?, HostLinear::new(&h.out)?]);
+        let mut heads = vec![head(&net.value)?, head(&net.advantage)?];
+        if let Some(v) = &net.velocity {
+            heads.push(head(v)?);
+        }
+        Some(Self { config: config.clone(), depth, laser, fusion, heads })
+    }
+
+    /// The forward pass; `velocity`: also run the auxiliary head (training), else only the
+    /// Q-values (acting, eq. 10 targets).
+    ///
+    /// # Panics
+    /// If an input the variant reads has the wrong size.
+    pub fn forward(&self, x: &HostInputs<'_>, velocity: bool) -> Tape {
+        self.forward_parts(&[*x], if velocity { x.batch } else { 0 })
+    }
+
+    /// The forward pass of `parts` stacked into one batch (the weights are read once for
+    /// all of them), with the auxiliary head on the first `velocity_rows` rows (0: none).
+    ///
+    /// # Panics
+    /// If an input the variant reads has the wrong size.
+    pub fn forward_parts(&self, parts: &[HostInputs<'_>], velocity_rows: usize) -> Tape {
+        let b: usize = parts.iter().map(|p| p.batch).sum();
+        let cfg = &self.config;
+        let mut t = Tape { batch: b, times: StageClock::start(), ..Tape::default() };
+        let ((depth, dfeat), (laser, lfeat)) = rayon::join(
+            || self.depth.as_ref().map(|layers| self.depth_forward(layers, parts, b)).unzip(),
+            || self.laser.as_ref().map(|layers| self.laser_forward(layers, parts, b)).unzip(),
+        );
+        if let Some((patches, act, cols)) = depth {
+            (t.depth_patches, t.depth_act, t.depth_cols) = (patches, act, cols);
+        }
+        if let Some((cols, act)) = laser {
+            (t.laser_cols, t.laser_act) = (cols, act);
+        }
+        t.times.lap("streams (depth beside laser)");
+        let width = cfg.representation();
+        let mut pieces: Vec<(&[f32], usize)> = Vec::new();
+        if let Some(d) = &dfeat {
+            pieces.push((d, cfg.depth_features()));
+        }
+        if let Some([fd, fl, fo]) = &self.fusion {
+            let (dfeat, lfeat) = (dfeat.as_deref().unwrap_or(&[]), lfeat.as_deref().unwrap_or(&[]));
+            let (d, l) = rayon::join(|| fd.forward(dfeat, b), || fl.forward(lfeat, b));
+            let z = outer(&d, &l, b);
+            let mut f = fo.forward(&z, b);
+            relu_in_place(&mut f);
+            t.fusion = [d, l, z, f];
+            t.times.lap("bilinear fusion");
+        }
+        if self.fusion.is_some() {
+            pieces.push((&t.fusion[3], t.fusion[3].len() / b.max(1)));
+        }
+        if let Some(l) = &lfeat {
+            pieces.push((l, cfg.laser_features()));
+        }
+        let goal: Vec<f32> = parts.iter().flat_map(|p| p.goal.iter().copied()).collect();
+        if cfg.goal_dim > 0 {
+            assert_eq!(goal.len(), b * cfg.goal_dim, "goal input size");
+            pieces.push((&goal, cfg.goal_dim));
+        }
+        t.h = concat_columns(&pieces, b, width);
+        let heads: Vec<(usize, usize)> = (0..self.heads.len())
+            .map(|i| (i, if i < 2 { b } else { velocity_rows.min(b) }))
+            .filter(|&(_, rows)| rows > 0)
+            .collect();
+        let h = &t.h;
+        let outs: Vec<(Vec<f32>, Vec<f32>)> = heads
+            .par_iter()
+            .map(|&(i, rows)| {
+                let [hidden, out] = &self.heads[i];
+                let mut u = hidden.forward(&h[..rows * width], rows);
+                relu_in_place(&mut u);
+                let o = out.forward(&u, rows);
+                (u, o)
+            })
+            .collect();
+        t.times.lap("heads");
+        t.q = dueling(&outs[0].1, &outs[1].1, b);
+        for (i, (u, o)) in outs.into_iter().enumerate() {
+            if i == 2 {
+                t.velocity = o;
+            }
+            t.hidden.push(u);
+        }
+        t.velocity_rows = velocity_rows.min(b);
+        t
+    }
+
+    /// The depth stream on the stacked `parts`: its patches, each layer's (channel-last)
+    /// output, the second and third layers' patches, and the flattened features.
+    #[allow(clippy::type_complexity)]
+    fn depth_forward(
+        &self,
+        [c1, c2, c3]: &[HostConv; 3],
+        parts: &[HostInputs<'_>],
+        b: usize,
+    ) -> ((Vec<f32>, [Vec<f32>; 3], [Vec<f32>; 2]), Vec<f32>) {
+        let cfg = &self.config;
+        let g1 = PatchGeometry::depth_conv1(cfg.frames, cfg.depth_rows, cfg.depth_cols);
+        let per_image = g1.positions() * g1.patch_len();
+        let mut patches = vec![0.0; b * per_image];
+        let mut row = 0;
+        for p in parts {
+            let image = cfg.frames * cfg.depth_rows * cfg.depth_cols;
+            assert_eq!(p.depth.len(), p.batch * image, "depth input size");
+            g1.extract_into(
+                p.depth,
+                p.batch,
+                &mut patches[row * per_image..(row + p.batch) * per_image],
+            );
+            row += p.batch;
+        }
+        let a1 = patch_product_relu(&patches, c1.weight.data(), c1.bias.data(), b * g1.positions());
+        let mut cols = [Vec::new(), Vec::new()];
+        let a2 = self.conv_relu(c2, &a1, b, &mut cols[0]);
+        let a3 = self.conv_relu(c3, &a2, b, &mut cols[1]);
+        let (p, c) = (c3.geometry.positions(), c3.geometry.out_channels);
+        let mut dfeat = vec![0.0; b * p * c];
+        flatten_into(&a3, b, p, c, &mut dfeat, p * c, 0);
+        ((patches, [a1, a2, a3], cols), dfeat)
+    }
+
+    /// The laser stream on the stacked `parts`: each layer's patches and (channel-last)
+    /// output, and the flattened features.
+    #[allow(clippy::type_complexity)]
+    fn laser_forward(
+        &self,
+        layers: &[HostConv; 3],
+        parts: &[HostInputs<'_>],
+        b: usize,
+    ) -> (([Vec<f32>; 3], [Vec<f32>; 3]), Vec<f32>) {
+        let cfg = &self.config;
+        let mut a = Vec::with_capacity(b * cfg.frames * cfg.beams);
+        for p in parts {
+            assert_eq!(p.laser.len(), p.batch * cfg.frames * cfg.beams, "laser input size");
+            a.extend(channels_last(p.laser, p.batch, cfg.frames, cfg.beams));
+        }
+        let mut cols: [Vec<f32>; 3] = Default::default();
+        let mut act: [Vec<f32>; 3] = Default::default();
+        for (i, layer) in layers.iter().enumerate() {
+            a = self.conv_relu(layer, &a, b, &mut cols[i]);
+            act[i] = a.clone();
+        }
+        let g = layers[2].geometry;
+        let (p, c) = (g.positions(), g.out_channels);
+        let mut lfeat = vec![0.0; b * p * c];
+        flatten_into(&a, b, p, c, &mut lfeat, p * c, 0);
+        ((cols, act), lfeat)
+    }
+
+    /// Q-values alone, `[B, actions]` (no auxiliary head, nothing kept).
+    pub fn q_values(&self, x: &HostInputs<'_>) -> Vec<f32> {
+        self.forward(x, false).q
+    }
+
+    /// One convolution + ReLU on channel-last activations; keeps its patches in `cols`.
+    fn conv_relu(
+        &self,
+        layer: &HostConv,
+        x: &[f32],
+        batch: usize,
+        cols: &mut Vec<f32>,
+    ) -> Vec<f32> {
+        let g = layer.geometry;
+        g.im2col(x, batch, cols);
+        let w = g.permute_weight(layer.weight.data());
+        patch_product_relu(cols, &w, layer.bias.data(), batch * g.positions())
+    }
+
+    /// The backward pass of `tape` for the loss gradients `dq` (`[R, actions]`) and, with the
+    /// auxiliary head, `dvelocity` (`[R, 6]`), where the loss depends on the first `R` rows of
+    /// the forward pass only (`R` = its velocity rows when `dvelocity` is given): every
+    /// parameter's gradient, in the network's parameter order.
+    ///
+    /// # Panics
+    /// If a gradient does not fit the tape.
+    pub fn backward(&self, tape: &Tape, dq: &[f32], dvelocity: Option<&[f32]>) -> Vec<HostGrad> {
+        self.backward_timed(tape, dq, dvelocity).0
+    }
+
+    /// [`HostNet::backward`], and the time of each of its stages.
+    ///
+    /// # Panics
+    /// As [`HostNet::backward`].
+    pub fn backward_timed(
+        &self,
+        tape: &Tape,
+        dq: &[f32],
+        dvelocity: Option<&[f32]>,
+    ) -> (Vec<HostGrad>, StageClock) {
+        let mut clock = StageClock::start();
+        let cfg = &self.config;
+        let width = cfg.representation();
+        let actions = cfg.actions;
+        let b = dq.len() / actions;
+        assert!(dq.len() == b * actions && b <= tape.batch, "dq size");
+        // Paper eq. (11): Q = V + A − mean(A).
+        let dv: Vec<f32> = dq.chunks_exact(actions).map(|r| r.iter().sum()).collect();
+        let da: Vec<f32> = dq
+            .chunks_exact(actions)
+            .flat_map(|r| {
+                let mean = r.iter().sum::<f32>() / actions as f32;
+                r.iter().map(move |g| g - mean)
+            })
+            .collect();
+        let mut douts = vec![dv, da];
+        if let Some(dvel) = dvelocity {
+            assert!(
+                tape.hidden.len() == 3 && tape.velocity_rows == b,
+                "a velocity gradient needs the auxiliary head's forward on the same rows"
+            );
+            douts.push(dvel.to_vec());
+        }
+        // Heads, side by side: the output layer, then the hidden layer and its share of dh.
+        let h = &tape.h[..b * width];
+        let per_head: Vec<(Vec<HostGrad>, Vec<f32>)> = self
+            .heads
+            .par_iter()
+            .zip(douts.par_iter())
+            .enumerate()
+            .map(|(i, ([hidden, out], dout))| {
+                let u = &tape.hidden[i][..b * HIDDEN];
+                let mut du = vec![0.0; u.len()];
+                let mut g = Vec::new();
+                out.backward(u, dout, b, Some((&mut du, false)), &mut g);
+                relu_backward(&mut du, u);
+                let mut dh = vec![0.0; b * width];
+                let mut gh = Vec::new();
+                hidden.backward(h, &du, b, Some((&mut dh, false)), &mut gh);
+                gh.extend(g);
+                (gh, dh)
+            })
+            .collect();
+        let mut dh = vec![0.0; b * width];
+        let mut head_grads = Vec::new();
+        for (g, part) in per_head {
+            for (d, p) in dh.iter_mut().zip(&part) {
+                *d += p;
+            }
+            head_grads.extend(g);
+        }
+        clock.lap("heads");
+        let depth_width = self.depth.as_ref().map_or(0, |_| cfg.depth_features());
+        let fusion_width = self.fusion.as_ref().map_or(0, |f| f[2].dims().1);
+        let laser_width = self.laser.as_ref().map_or(0, |_| cfg.laser_features());
+        let laser_at = depth_width + fusion_width;
+        let mut d_dfeat = columns(&dh, b, width, 0, depth_width);
+        let mut d_lfeat = columns(&dh, b, width, laser_at, laser_width);
+        let mut fusion_grads = Vec::new();
+        if let Some([fd, fl, fo]) = &self.fusion {
+            let [d, l, z, f] = &tape.fusion;
+            let (d, l, z, f) = (
+                &d[..b * FUSION_D],
+                &l[..b * FUSION_L],
+                &z[..b * FUSION_D * FUSION_L],
+                &f[..b * fusion_width],
+            );
+            let mut df = columns(&dh, b, width, depth_width, fusion_width);
+            relu_backward(&mut df, f);
+            let mut dz = vec![0.0; z.len()];
+            let mut g_out = Vec::new();
+            fo.backward(z, &df, b, Some((&mut dz, false)), &mut g_out);
+            let (dd, dl) = outer_backward(&dz, d, l, b);
+            let dfeat = columns(h, b, width, 0, depth_width);
+            let lfeat = columns(h, b, width, laser_at, laser_width);
+            let (g_d, g_l) = rayon::join(
+                || {
+                    let mut g = Vec::new();
+                    fd.backward(&dfeat, &dd, b, Some((&mut d_dfeat, true)), &mut g);
+                    g
+                },
+                || {
+                    let mut g = Vec::new();
+                    fl.backward(&lfeat, &dl, b, Some((&mut d_lfeat, true)), &mut g);
+                    g
+                },
+            );
+            fusion_grads = [g_d, g_l, g_out].concat();
+            clock.lap("bilinear fusion");
+        }
+        let (depth_grads, laser_grads) = rayon::join(
+            || self.depth.as_ref().map(|layers| self.depth_backward(layers, tape, &d_dfeat, b)),
+            || self.laser.as_ref().map(|layers| self.laser_backward(layers, tape, &d_lfeat, b)),
+        );
+        clock.lap("streams (depth beside laser)");
+        let mut grads: Vec<HostGrad> = depth_grads.unwrap_or_default();
+        grads.extend(laser_grads.unwrap_or_default());
+        grads.extend(fusion_grads);
+        grads.extend(head_grads);
+        (grads, clock)
+    }
+
+    /// The depth stream's gradients from its features' (first `b` rows of the tape).
+    fn depth_backward(
+        &self,
+        layers: &[HostConv; 3],
+        tape: &Tape,
+        d_dfeat: &[f32],
+        b: usize,
+    ) -> Vec<HostGrad> {
+        let g3 = layers[2].geometry;
+        let (p3, c3) = (g3.positions(), g3.out_channels);
+        let mut d3 = unflatten(d_dfeat, b, p3, c3, p3 * c3, 0);
+        relu_backward(&mut d3, &tape.depth_act[2]);
+        let mut dcols = Vec::new();
+        let rows = |g: ConvGeometry| b * g.positions() * g.patch_len();
+        let cols3 = &tape.depth_cols[1][..rows(g3)];
+        let (w3, b3) = self.conv_backward(&layers[2], cols3, &d3, b, Some(&mut dcols));
+        let mut d2 = Vec::new();
+        g3.col2im(&dcols, b, &mut d2);
+        relu_backward(&mut d2, &tape.depth_act[1]);
+        let g2 = layers[1].geometry;
+        let cols2 = &tape.depth_cols[0][..rows(g2)];
+        let (w2, b2) = self.conv_backward(&layers[1], cols2, &d2, b, Some(&mut dcols));
+        let mut d1 = Vec::new();
+        g2.col2im(&dcols, b, &mut d1);
+        relu_backward(&mut d1, &tape.depth_act[0]);
+        let rows1 = b * layers[0].geometry.positions();
+        let patches = &tape.depth_patches[..rows1 * layers[0].geometry.patch_len()];
+        let (w1, b1) = patch_product_backward(patches, layers[0].weight.data(), &d1, rows1, None);
+        vec![
+            HostGrad::of(&layers[0].weight, w1),
+            HostGrad::of(&layers[0].bias, b1),
+            HostGrad::of(&layers[1].weight, w2),
+            HostGrad::of(&layers[1].bias, b2),
+            HostGrad::of(&layers[2].weight, w3),
+            HostGrad::of(&layers[2].bias, b3),
+        ]
+    }
+
+    /// The laser stream's gradients from its features' (first `b` rows of the tape).
+    fn laser_backward(
+        &self,
+        layers: &[HostConv; 3],
+        tape: &Tape,
+        d_lfeat: &[f32],
+        b: usize,
+    ) -> Vec<HostGrad> {
+        let g3 = layers[2].geometry;
+        let (p3, c3) = (g3.positions(), g3.out_channels);
+        let mut dy = unflatten(d_lfeat, b, p3, c3, p3 * c3, 0);
+        let mut layer_grads = Vec::new();
+        for i in (0..3).rev() {
+            let g = layers[i].geometry;
+            relu_backward(&mut dy, &tape.laser_act[i]);
+            let mut dcols = Vec::new();
+            let wants_input = i > 0;
+            let cols = &tape.laser_cols[i][..b * g.positions() * g.patch_len()];
+            let (w, bias) =
+                self.conv_backward(&layers[i], cols, &dy, b, wants_input.then_some(&mut dcols));
+            layer_grads
+                .push([HostGrad::of(&layers[i].weight, w), HostGrad::of(&layers[i].bias, bias)]);
+            if wants_input {
+                let mut dx = Vec::new();
+                g.col2im(&dcols, b, &mut dx);
+                dy = dx;
+            }
+        }
+        layer_grads.into_iter().rev().flatten().collect()
+    }
+
+    /// A convolution's weight (in its own `[out, in, k…]` layout) and bias gradients, and
+    /// with `dcols` its patches' gradient.
+    fn conv_backward(
+        &self,
+        layer: &HostConv,
+        cols: &[f32],
+        dy: &[f32],
+        batch: usize,
+        dcols: Option<&mut Vec<f32>>,
+    ) -> (Vec<f32>, Vec<f32>) {
+        let g = layer.geometry;
+        let w = g.permute_weight(layer.weight.data());
+        let (dw, db) = patch_product_backward(cols, &w, dy, batch * g.positions(), dcols);
+        (g.unpermute_weight(&dw), db)
+    }
+}
+
+/// Batched `vec(d lᵀ)` (paper eq. 7): entry `i·L_l + j` of row `b` is `d_bi · l_bj`.
+fn outer(d: &[f32], l: &[f32], batch: usize) -> Vec<f32> {
+    let (nd, nl) = (d.len() / batch.max(1), l.len() / batch.max(1));
+    let mut z = vec![0.0; batch * nd * nl];
+    for b in 0..batch {
+        for i in 0..nd {
+            let di = d[b * nd + i];
+            let row = &mut z[(b * nd + i) * nl..(b * nd + i + 1) * nl];
+            for (z, lj) in row.iter_mut().zip(&l[b * nl..(b + 1) * nl]) {
+                *z = di * lj;
+            }
+        }
+    }
+    z
+}
+
+/// Gradients of [`outer`]'s inputs from its output's: `∂d_i = Σ_j ∂z_ij l_j`,
+/// `∂l_j = Σ_i ∂z_ij d_i`.
+fn outer_backward(dz: &[f32], d: &[f32], l: &[f32], batch: usize) -> (Vec<f32>, Vec<f32>) {
+    let (nd, nl) = (d.len() / batch.max(1), l.len() / batch.max(1));
+    let (mut dd, mut dl) = (vec![0.0; d.len()], vec![0.0; l.len()]);
+    for b in 0..batch {
+        let lb = &l[b * nl..(b + 1) * nl];
+        for i in 0..nd {
+            let row = &dz[(b * nd + i) * nl..(b * nd + i + 1) * nl];
+            dd[b * nd + i] = row.iter().zip(lb).map(|(g, l)| g * l).sum();
+            let di = d[b * nd + i];
+            for (acc, g) in dl[b * nl..(b + 1) * nl].iter_mut().zip(row) {
+                *acc += g * di;
+            }
+        }
+    }
+    (dd, dl)
+}
+
+/// Paper eq. (11) on host rows: `(V + A) − mean(A)`, burn's order of operations.
+fn dueling(value: &[f32], advantage: &[f32], batch: usize) -> Vec<f32> {
+    let actions = advantage.len() / batch.max(1);
+    let mut q = Vec::with_capacity(advantage.len());
+    for (v, a) in value.iter().zip(advantage.chunks_exact(actions.max(1))) {
+        let mean = a.iter().sum::<f32>() / actions as f32;
+        q.extend(a.iter().map(|a| (v + a) - mean));
+    }
+    q
+}
+
+impl QNet {
+    /// This network's weights for the host kernels (see the `host` module), or `None` on a
+    /// backend whose tensors do not lie in host memory (everything but `flex`).
+    pub fn host(&self, config: &QNetConfig) -> Option<HostNet> {
+        HostNet::new(self, config)
+    }
+}
+
+#[cfg(test)]
+mod tests;
