@@ -99,6 +99,29 @@ impl QNetConfig {
         2 * macs as u64
     }
 
+    /// Floating-point operations of one observation's backward pass in a gradient step: for
+    /// every layer the weight gradient and the input gradient (each as many multiply-adds as
+    /// its forward), except the input gradient of the first layers, which no one needs.
+    pub fn backward_flops(&self) -> u64 {
+        let v = self.variant;
+        let mut first = 0usize;
+        if v.uses_depth() {
+            let (r1, c1) = (same(self.depth_rows, 8), same(self.depth_cols, 8));
+            first += 16 * r1 * c1 * self.frames * 10 * 14;
+        }
+        if v.uses_laser() {
+            first += 16 * same(self.beams, 4) * self.frames * 5;
+        }
+        2 * self.forward_flops() - 2 * first as u64
+    }
+
+    /// Floating-point operations of one double-DQN gradient step per sample of its batch
+    /// (paper eqs. 10–13): the online forward on `s` with the auxiliary head, two greedy
+    /// forwards on `s'` (online and target) and the backward pass (~140 M for MDRLAT).
+    pub fn update_flops(&self) -> u64 {
+        self.forward_flops() + 2 * self.decision_flops() + self.backward_flops()
+    }
+
     /// Floating-point operations of one greedy decision ([`QNet::q_values`]): the forward
     /// pass without the auxiliary head (~26.6 M for MDRLAT).
     pub fn decision_flops(&self) -> u64 {

@@ -77,16 +77,13 @@ impl PatchGeometry {
         let per_image = (self.positions() * self.patch_len()).max(1);
         assert_eq!(out.len(), batch * self.positions() * self.patch_len(), "patch output size");
         // One image per work item: a batch of 32 is 23 MB of patches, two cores' work.
-        out.par_chunks_mut(per_image).zip(images.par_chunks((c * h * w).max(1))).for_each(
-            |(out, image)| {
-                out.fill(0.0);
-                self.extract_one(image, out);
-            },
-        );
+        out.par_chunks_mut(per_image)
+            .zip(images.par_chunks((c * h * w).max(1)))
+            .for_each(|(out, image)| self.extract_one(image, out));
     }
 
-    /// The patches of one `[channels, rows, cols]` image into `out` (zeroed, one image's
-    /// worth).
+    /// The patches of one `[channels, rows, cols]` image into `out` (one image's worth, any
+    /// contents: every value is written, padding as 0).
     fn extract_one(&self, image: &[f32], out: &mut [f32]) {
         let (c, h, w) = (self.channels, self.rows, self.cols);
         let [or, oc] = self.out();
@@ -98,19 +95,24 @@ impl PatchGeometry {
             for x in 0..oc {
                 // Kernel columns that land inside the image: one slice copy per row.
                 let x0 = (x * self.stride) as isize - pl as isize;
-                let kx_lo = (-x0).max(0) as usize;
-                let kx_hi = ((w as isize - x0).max(0) as usize).min(kw);
+                let kx_lo = ((-x0).max(0) as usize).min(kw);
+                let kx_hi = ((w as isize - x0).max(0) as usize).clamp(kx_lo, kw);
                 for ch in 0..c {
                     let plane = &image[ch * h * w..(ch + 1) * h * w];
                     for ky in 0..kh {
                         let iy = (y * self.stride + ky) as isize - pt as isize;
-                        if !(0..h as isize).contains(&iy) || kx_lo >= kx_hi {
+                        let dst = o + ch * kernel_plane + ky * kw;
+                        let row = &mut out[dst..dst + kw];
+                        if !(0..h as isize).contains(&iy) {
+                            row.fill(0.0);
                             continue;
                         }
-                        let src = iy as usize * w + (x0 + kx_lo as isize) as usize;
-                        let dst = o + ch * kernel_plane + ky * kw + kx_lo;
-                        out[dst..dst + kx_hi - kx_lo]
-                            .copy_from_slice(&plane[src..src + kx_hi - kx_lo]);
+                        row[..kx_lo].fill(0.0);
+                        if kx_lo < kx_hi {
+                            let src = iy as usize * w + (x0 + kx_lo as isize) as usize;
+                            row[kx_lo..kx_hi].copy_from_slice(&plane[src..src + kx_hi - kx_lo]);
+                        }
+                        row[kx_hi..].fill(0.0);
                     }
                 }
                 o += patch;
@@ -138,5 +140,9 @@ mod tests {
         assert_eq!(&out[4 * 9..5 * 9], &[6.0, 7.0, 8.0, 11.0, 12.0, 13.0, 16.0, 17.0, 18.0]);
         let paper = PatchGeometry::depth_conv1(4, 128, 160);
         assert_eq!((paper.out(), paper.patch_len()), ([16, 20], 560));
+        // Every value is written, padding included: a dirty buffer gives the same patches.
+        let mut dirty = vec![f32::NAN; out.len()];
+        g.extract_into(&img, 1, &mut dirty);
+        assert_eq!(dirty, out);
     }
 }

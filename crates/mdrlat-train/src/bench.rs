@@ -42,19 +42,29 @@ pub fn median_ms(min_time: Duration, mut f: impl FnMut()) -> (f64, usize) {
     (samples[samples.len() / 2], samples.len())
 }
 
-/// Median milliseconds of one gradient step (batch `batch`) of `variant` on `device`.
+/// Median milliseconds of one gradient step (batch `batch`) of `variant` on `device`, with
+/// the host kernels where the backend has them (`host_kernels`; else burn's autodiff).
 pub fn update_ms(
     variant: Variant,
     batch: usize,
     device: &Device,
+    host_kernels: bool,
     min_time: Duration,
 ) -> (f64, usize) {
     let config = TrainConfig { variant, batch_size: batch, ..TrainConfig::default() };
     let mut learner = Learner::new(&config, device);
+    learner.set_host_kernels(host_kernels);
     let b = random_batch(variant, batch, 1);
     median_ms(min_time, || {
         learner.update(&b);
     })
+}
+
+/// The arithmetic rate of a gradient step of `variant` (batch `batch`) that takes `ms`
+/// milliseconds, GFLOP/s (see `QNetConfig::update_flops`).
+pub fn update_gflops(variant: Variant, batch: usize, ms: f64) -> f64 {
+    let flop = mdrlat_nn::QNetConfig::new(variant).update_flops() as f64 * batch as f64;
+    flop / (ms * 1e-3) / 1e9
 }
 
 /// Median milliseconds of one greedy decision (batch 1) of `variant` on `device`, with the

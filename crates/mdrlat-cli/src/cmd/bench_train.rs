@@ -6,7 +6,8 @@ use super::train::DeviceKind;
 use anyhow::Result;
 use mdrlat_nn::Variant;
 use mdrlat_train::bench::{
-    gemm_reference_gflops, infer_ms, policy_batch_ms, profile, replay_bytes, update_ms,
+    gemm_reference_gflops, infer_ms, policy_batch_ms, profile, replay_bytes, update_gflops,
+    update_ms,
 };
 use std::time::Duration;
 
@@ -35,6 +36,10 @@ pub struct TrainArgs {
     /// forward + backward + Adam.
     #[arg(long)]
     profile: bool,
+    /// Also time each gradient step with burn's autodiff instead of the host kernels (the
+    /// learner before them), side by side in the same run (`cpu` only).
+    #[arg(long)]
+    compare_autodiff: bool,
 }
 
 /// `mdrlat bench train`.
@@ -71,16 +76,18 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             std::thread::available_parallelism().map_or(1, |n| n.get())
         );
         out!(
-            "{:<11} {:>16} {:>22} {:>33} {:>14}",
+            "{:<11} {:>30} {:>22} {:>33} {:>13}",
             "variant",
-            "train step (ms)",
+            "train step (ms, GFLOP/s, /ref)",
             "inference, 1 core (ms)",
             "64 obs, all cores (GFLOP/s, /ref)",
             "replay (MiB)"
         );
     }
     for v in variants {
-        let (train, n_train) = update_ms(v, a.batch, &device, time);
+        let (train, n_train) = update_ms(v, a.batch, &device, true, time);
+        let train_gflops = update_gflops(v, a.batch, train);
+        let autodiff = a.compare_autodiff.then(|| update_ms(v, a.batch, &device, false, time));
         let (infer, n_infer) = infer_ms(v, &device, time, 1);
         let replay = replay_bytes(v, 20_000) as f64 / (1024.0 * 1024.0);
         let (batch_ms, batch_gflops) =
@@ -89,8 +96,21 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             out!(
                 "{}",
                 serde_json::json!({"bench": "train", "variant": v.name(), "backend": backend, "batch": a.batch,
-                    "ms_per_step": (train * 100.0).round() / 100.0, "samples": n_train})
+                    "ms_per_step": (train * 100.0).round() / 100.0, "samples": n_train,
+                    "gflop_per_step": (mdrlat_nn::QNetConfig::new(v).update_flops() as f64 * a.batch as f64 / 1e7).round() / 100.0,
+                    "gflops": (train_gflops * 10.0).round() / 10.0,
+                    "efficiency": (train_gflops / reference * 1000.0).round() / 1000.0})
             );
+            if let Some((ms, samples)) = autodiff {
+                let gflops = update_gflops(v, a.batch, ms);
+                out!(
+                    "{}",
+                    serde_json::json!({"bench": "train_autodiff", "variant": v.name(), "backend": backend, "batch": a.batch,
+                        "ms_per_step": (ms * 100.0).round() / 100.0, "samples": samples,
+                        "gflops": (gflops * 10.0).round() / 10.0,
+                        "efficiency": (gflops / reference * 1000.0).round() / 1000.0})
+                );
+            }
             out!(
                 "{}",
                 serde_json::json!({"bench": "infer", "variant": v.name(), "backend": backend,
@@ -112,14 +132,13 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         } else {
             let batched =
                 format!("{batch_ms:.1} ms, {batch_gflops:.1} ({:.2})", batch_gflops / reference);
-            out!(
-                "{:<11} {:>16.1} {:>22.2} {:>26} {:>14.0}",
-                v.name(),
-                train,
-                infer,
-                batched,
-                replay
-            );
+            let step = format!("{train:.1}, {train_gflops:.1} ({:.2})", train_gflops / reference);
+            out!("{:<11} {:>30} {:>22.2} {:>33} {:>13.0}", v.name(), step, infer, batched, replay);
+            if let Some((ms, _)) = autodiff {
+                let gflops = update_gflops(v, a.batch, ms);
+                let step = format!("{ms:.1}, {gflops:.1} ({:.2})", gflops / reference);
+                out!("{:<11} {:>30}", "  autodiff", step);
+            }
         }
     }
     if a.profile {

@@ -111,11 +111,28 @@ impl HostLinear {
         grads: &mut Vec<HostGrad>,
     ) {
         let (din, dout) = self.dims();
-        let mut dw = vec![0.0; din * dout];
-        gemm(din, dout, batch, Mat::t(x), Mat::n(dy), &mut dw, false);
-        if let Some((dx, accumulate)) = dx {
-            gemm(batch, din, dout, Mat::n(dy), Mat::t(self.weight.data()), dx, accumulate);
-        }
+        let weight = self.weight.data();
+        let (dw, ()) = rayon::join(
+            || {
+                let mut dw = vec![0.0; din * dout];
+                gemm(din, dout, batch, Mat::t(x), Mat::n(dy), &mut dw, false);
+                dw
+            },
+            || {
+                if let Some((dx, accumulate)) = dx {
+                    // dx = dy · Wᵀ, computed as its transpose W · dyᵀ: `gemm`'s kernels run
+                    // ~2x faster with the long dimension (the layer's input) first.
+                    let mut dxt = vec![0.0; din * batch];
+                    gemm(din, batch, dout, Mat::n(weight), Mat::t(dy), &mut dxt, false);
+                    for (r, row) in dx.chunks_exact_mut(din).take(batch).enumerate() {
+                        for (j, d) in row.iter_mut().enumerate() {
+                            let v = dxt[j * batch + r];
+                            *d = if accumulate { *d + v } else { v };
+                        }
+                    }
+                }
+            },
+        );
         grads.push(HostGrad::of(&self.weight, dw));
         grads.push(HostGrad::of(&self.bias, column_sums(dy, dout)));
     }
