@@ -172,3 +172,42 @@ fn in_place_updates_spare_the_target(device: &Device) {
     assert!(per_step >= 20, "{per_step} parameters");
     assert_eq!((fused, fallback), (3 * per_step, 3 * per_step));
 }
+
+/// The host kernels and burn's autodiff are one learning rule: from the same seed, a few
+/// gradient steps (with a target sync between them) give the same losses and Q-values.
+#[test]
+fn host_kernels_and_burn_autodiff_take_the_same_steps() {
+    for variant in [Variant::LaserOnly, Variant::Mdrlat] {
+        let cfg = TrainConfig { variant, learning_rate: 1e-4, ..TrainConfig::default() };
+        let (mut host, mut burn) =
+            (Learner::new(&cfg, &Device::flex()), Learner::new(&cfg, &Device::flex()));
+        burn.set_host_kernels(false);
+        assert!(host.uses_host_kernels() && !burn.uses_host_kernels());
+        let mut rng = Rng::seed_from_u64(9);
+        let depth = variant.uses_depth();
+        let batches: Vec<Batch> =
+            (0..4).map(|_| batch(6, &[0.0, 1.0, 0.0, 0.0, 0.0, 1.0], &mut rng, depth)).collect();
+        for (i, b) in batches.iter().enumerate() {
+            if i == 2 {
+                host.sync_target();
+                burn.sync_target();
+            }
+            let (h, a) = (host.update(b), burn.update(b));
+            for (name, x, y) in [("td", h.td, a.td), ("at", h.at, a.at), ("q", h.q_mean, a.q_mean)]
+            {
+                assert!(
+                    (x - y).abs() <= 1e-4 * y.abs().max(1.0),
+                    "{variant} step {i} {name}: {x} vs {y}"
+                );
+            }
+        }
+        let next = mdrlat_train::Inputs {
+            size: 6,
+            laser: batches[0].next_laser.clone(),
+            depth: batches[0].next_depth.clone(),
+        };
+        let (qh, qa) = (host.q_values(&next), burn.q_values(&next));
+        let worst = qh.iter().zip(&qa).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "{variant}: Q-values after the steps differ by {worst}");
+    }
+}
