@@ -8,6 +8,7 @@
 //! `[16, 4, 10, 14]` convolution layout, so exported weights are a plain `Conv2d`.
 
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 
 /// Geometry of a SAME-padded 2D convolution's patches.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -62,34 +63,47 @@ impl PatchGeometry {
     /// If `images` does not hold `batch` images.
     pub fn extract(&self, images: &[f32], batch: usize, out: &mut Vec<f32>) {
         out.clear();
-        out.resize(batch * self.positions() * self.patch_len(), 0.0);
-        self.extract_into(images, batch, out);
+        self.extract_append(images, batch, out);
     }
 
-    /// [`PatchGeometry::extract`] into a slice of exactly `batch` images' patches (any
-    /// contents: every value is written).
+    /// [`PatchGeometry::extract`], appending to `out`: each value is written once (no
+    /// zeroing pass over the 23 MB of a batch of 32 first), one image per work item.
     ///
     /// # Panics
-    /// If `images` does not hold `batch` images or `out` their patches.
-    pub fn extract_into(&self, images: &[f32], batch: usize, out: &mut [f32]) {
+    /// If `images` does not hold `batch` images.
+    #[allow(unsafe_code)]
+    pub fn extract_append(&self, images: &[f32], batch: usize, out: &mut Vec<f32>) {
         let (c, h, w) = (self.channels, self.rows, self.cols);
         assert_eq!(images.len(), batch * c * h * w, "patch input size");
-        let per_image = (self.positions() * self.patch_len()).max(1);
-        assert_eq!(out.len(), batch * self.positions() * self.patch_len(), "patch output size");
-        // One image per work item: a batch of 32 is 23 MB of patches, two cores' work.
-        out.par_chunks_mut(per_image)
-            .zip(images.par_chunks((c * h * w).max(1)))
+        let per_image = self.positions() * self.patch_len();
+        if per_image == 0 || batch == 0 {
+            return;
+        }
+        let start = out.len();
+        out.reserve(batch * per_image);
+        let spare = &mut out.spare_capacity_mut()[..batch * per_image];
+        spare
+            .par_chunks_mut(per_image)
+            .zip(images.par_chunks(c * h * w))
             .for_each(|(out, image)| self.extract_one(image, out));
+        // SAFETY: `extract_one` writes every element of its image's chunk (each patch row
+        // is filled as zeros, copied pixels, zeros over its full kernel width, for every
+        // position, channel and kernel row: `patch_len` values per position), and the
+        // chunks cover the `batch · per_image` elements after `start`, within the capacity
+        // reserved above.
+        unsafe { out.set_len(start + batch * per_image) };
     }
 
-    /// The patches of one `[channels, rows, cols]` image into `out` (one image's worth, any
-    /// contents: every value is written, padding as 0).
-    fn extract_one(&self, image: &[f32], out: &mut [f32]) {
+    /// The patches of one `[channels, rows, cols]` image into `out` (one image's worth):
+    /// every value is written, padding as 0.
+    fn extract_one(&self, image: &[f32], out: &mut [MaybeUninit<f32>]) {
         let (c, h, w) = (self.channels, self.rows, self.cols);
         let [or, oc] = self.out();
         let [kh, kw] = self.kernel;
         let [pt, pl] = self.pad_before();
         let (patch, kernel_plane) = (self.patch_len(), kh * kw);
+        debug_assert_eq!(out.len(), or * oc * patch);
+        let zero = |row: &mut [MaybeUninit<f32>]| row.iter_mut().for_each(|v| _ = v.write(0.0));
         let mut o = 0;
         for y in 0..or {
             for x in 0..oc {
@@ -104,15 +118,18 @@ impl PatchGeometry {
                         let dst = o + ch * kernel_plane + ky * kw;
                         let row = &mut out[dst..dst + kw];
                         if !(0..h as isize).contains(&iy) {
-                            row.fill(0.0);
+                            zero(row);
                             continue;
                         }
-                        row[..kx_lo].fill(0.0);
+                        zero(&mut row[..kx_lo]);
                         if kx_lo < kx_hi {
                             let src = iy as usize * w + (x0 + kx_lo as isize) as usize;
-                            row[kx_lo..kx_hi].copy_from_slice(&plane[src..src + kx_hi - kx_lo]);
+                            let pixels = &plane[src..src + kx_hi - kx_lo];
+                            for (d, &p) in row[kx_lo..kx_hi].iter_mut().zip(pixels) {
+                                d.write(p);
+                            }
                         }
-                        row[kx_hi..].fill(0.0);
+                        zero(&mut row[kx_hi..]);
                     }
                 }
                 o += patch;
@@ -140,9 +157,10 @@ mod tests {
         assert_eq!(&out[4 * 9..5 * 9], &[6.0, 7.0, 8.0, 11.0, 12.0, 13.0, 16.0, 17.0, 18.0]);
         let paper = PatchGeometry::depth_conv1(4, 128, 160);
         assert_eq!((paper.out(), paper.patch_len()), ([16, 20], 560));
-        // Every value is written, padding included: a dirty buffer gives the same patches.
-        let mut dirty = vec![f32::NAN; out.len()];
-        g.extract_into(&img, 1, &mut dirty);
-        assert_eq!(dirty, out);
+        // Appending cuts the same patches after what is there.
+        let mut appended = vec![f32::NAN; 3];
+        g.extract_append(&img, 1, &mut appended);
+        assert_eq!(appended.len(), 3 + out.len());
+        assert_eq!(&appended[3..], &out[..]);
     }
 }

@@ -3,7 +3,7 @@
 //! `[out, in, kh, kw]` permuted to `[out, kh, kw, in]` to match. A 1D convolution is the
 //! `H = 1` case.
 
-use super::gemm::{Mat, gemm};
+use super::gemm::{Mat, gemm, gemm_new};
 
 /// Geometry of one convolution layer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -166,12 +166,9 @@ pub(crate) fn patch_product_backward(
 ) -> (Vec<f32>, Vec<f32>) {
     let out = dy.len() / rows.max(1);
     let k = w.len() / out.max(1);
-    let mut dw = vec![0.0; out * k];
-    gemm(out, k, rows, Mat::t(dy), Mat::n(cols), &mut dw, false);
+    let dw = gemm_new(out, k, rows, Mat::t(dy), Mat::n(cols));
     if let Some(dcols) = dcols {
-        dcols.clear();
-        dcols.resize(rows * k, 0.0);
-        gemm(rows, k, out, Mat::n(dy), Mat::n(w), dcols, false);
+        *dcols = gemm_new(rows, k, out, Mat::n(dy), Mat::n(w));
     }
     (dw, column_sums(dy, out))
 }

@@ -47,16 +47,57 @@ pub(crate) fn gemm(
     c: &mut [f32],
     accumulate: bool,
 ) {
-    assert!(a.data.len() >= m * k, "gemm: lhs has {} values, needs {m}x{k}", a.data.len());
-    assert!(b.data.len() >= k * n, "gemm: rhs has {} values, needs {k}x{n}", b.data.len());
     assert!(c.len() >= m * n, "gemm: output has {} values, needs {m}x{n}", c.len());
-    if m == 0 || n == 0 {
+    if k == 0 && !accumulate {
+        c[..m * n].fill(0.0);
         return;
     }
-    if k == 0 {
-        if !accumulate {
-            c[..m * n].fill(0.0);
-        }
+    // SAFETY: `c` holds `m × n` values (asserted) and is borrowed mutably, so it overlaps
+    // neither input.
+    unsafe { product(m, n, k, a, b, c.as_mut_ptr(), accumulate) }
+}
+
+/// `a · b` as a new `m × n` row-major matrix. Its memory is written once, by the product
+/// (not zeroed first: the gradients of a step are ~44 MB).
+///
+/// # Panics
+/// If a slice is shorter than its matrix.
+#[allow(unsafe_code)]
+pub(crate) fn gemm_new(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) -> Vec<f32> {
+    if m == 0 || n == 0 || k == 0 {
+        return vec![0.0; m * n];
+    }
+    let mut c = Vec::with_capacity(m * n);
+    // SAFETY: the capacity holds `m × n` values and overlaps neither input. Without
+    // `read_dst` the `gemm` crate never reads the destination: its first pass over the
+    // depth dimension stores `lhs · rhs` into every one of the `m × n` elements (alpha is
+    // zeroed and the microkernels' "alpha_status 0" path overwrites; `k > 0` here), later
+    // passes add to what it stored. So every element is initialised before `set_len`.
+    unsafe {
+        product(m, n, k, a, b, c.as_mut_ptr(), false);
+        c.set_len(m * n);
+    }
+    c
+}
+
+/// The `gemm` call behind [`gemm`] and [`gemm_new`].
+///
+/// # Safety
+/// `c` must be valid for writes of `m × n` values (and reads, with `accumulate`), and not
+/// overlap `a` or `b`.
+#[allow(unsafe_code)]
+unsafe fn product(
+    m: usize,
+    n: usize,
+    k: usize,
+    a: Mat<'_>,
+    b: Mat<'_>,
+    c: *mut f32,
+    accumulate: bool,
+) {
+    assert!(a.data.len() >= m * k, "gemm: lhs has {} values, needs {m}x{k}", a.data.len());
+    assert!(b.data.len() >= k * n, "gemm: rhs has {} values, needs {k}x{n}", b.data.len());
+    if m == 0 || n == 0 {
         return;
     }
     let (a_rs, a_cs) = a.strides(m, k);
@@ -66,15 +107,15 @@ pub(crate) fn gemm(
     } else {
         gemm::Parallelism::None
     };
-    // SAFETY: the asserts above keep every element the strides reach — `a` (m × k),
-    // `b` (k × n), `c` (m × n), row-major or transposed as `Mat` says — inside its slice;
-    // `c` is borrowed mutably, so it overlaps neither input.
+    // SAFETY: the asserts above keep every element the strides reach — `a` (m × k) and
+    // `b` (k × n), row-major or transposed as `Mat` says — inside its slice; the caller
+    // vouches for `c`.
     unsafe {
         gemm::gemm(
             m,
             n,
             k,
-            c.as_mut_ptr(),
+            c,
             1,
             n as isize,
             accumulate,
@@ -119,6 +160,7 @@ mod tests {
             (Mat::n(&a), Mat::t(&bt)),
             (Mat::t(&at), Mat::t(&bt)),
         ] {
+            assert_eq!(gemm_new(m, n, k, lhs, rhs), want);
             let mut c = vec![1.0f32; m * n];
             gemm(m, n, k, lhs, rhs, &mut c, false);
             assert_eq!(c, want);

@@ -24,7 +24,7 @@ use conv::{
     ConvGeometry, column_sums, patch_product_backward, patch_product_relu, relu_backward,
     relu_in_place,
 };
-use gemm::{Mat, gemm};
+use gemm::{Mat, gemm, gemm_new};
 use rayon::prelude::*;
 
 /// Width of the heads' hidden layers, and the bilinear fusion's `L_d`, `L_l`.
@@ -113,17 +113,12 @@ impl HostLinear {
         let (din, dout) = self.dims();
         let weight = self.weight.data();
         let (dw, ()) = rayon::join(
-            || {
-                let mut dw = vec![0.0; din * dout];
-                gemm(din, dout, batch, Mat::t(x), Mat::n(dy), &mut dw, false);
-                dw
-            },
+            || gemm_new(din, dout, batch, Mat::t(x), Mat::n(dy)),
             || {
                 if let Some((dx, accumulate)) = dx {
                     // dx = dy · Wᵀ, computed as its transpose W · dyᵀ: `gemm`'s kernels run
                     // ~2x faster with the long dimension (the layer's input) first.
-                    let mut dxt = vec![0.0; din * batch];
-                    gemm(din, batch, dout, Mat::n(weight), Mat::t(dy), &mut dxt, false);
+                    let dxt = gemm_new(din, batch, dout, Mat::n(weight), Mat::t(dy));
                     for (r, row) in dx.chunks_exact_mut(din).take(batch).enumerate() {
                         for (j, d) in row.iter_mut().enumerate() {
                             let v = dxt[j * batch + r];
@@ -510,18 +505,11 @@ impl HostNet {
     ) -> ((Vec<f32>, [Vec<f32>; 3], [Vec<f32>; 2]), Vec<f32>) {
         let cfg = &self.config;
         let g1 = PatchGeometry::depth_conv1(cfg.frames, cfg.depth_rows, cfg.depth_cols);
-        let per_image = g1.positions() * g1.patch_len();
-        let mut patches = vec![0.0; b * per_image];
-        let mut row = 0;
+        let mut patches = Vec::with_capacity(b * g1.positions() * g1.patch_len());
         for p in parts {
             let image = cfg.frames * cfg.depth_rows * cfg.depth_cols;
             assert_eq!(p.depth.len(), p.batch * image, "depth input size");
-            g1.extract_into(
-                p.depth,
-                p.batch,
-                &mut patches[row * per_image..(row + p.batch) * per_image],
-            );
-            row += p.batch;
+            g1.extract_append(p.depth, p.batch, &mut patches);
         }
         let a1 = patch_product_relu(&patches, c1.weight.data(), c1.bias.data(), b * g1.positions());
         let mut cols = [Vec::new(), Vec::new()];
