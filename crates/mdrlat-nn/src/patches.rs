@@ -103,7 +103,6 @@ impl PatchGeometry {
         let [pt, pl] = self.pad_before();
         let (patch, kernel_plane) = (self.patch_len(), kh * kw);
         debug_assert_eq!(out.len(), or * oc * patch);
-        let zero = |row: &mut [MaybeUninit<f32>]| row.iter_mut().for_each(|v| _ = v.write(0.0));
         let mut o = 0;
         for y in 0..or {
             for x in 0..oc {
@@ -118,24 +117,40 @@ impl PatchGeometry {
                         let dst = o + ch * kernel_plane + ky * kw;
                         let row = &mut out[dst..dst + kw];
                         if !(0..h as isize).contains(&iy) {
-                            zero(row);
+                            write_zeros(row);
                             continue;
                         }
-                        zero(&mut row[..kx_lo]);
+                        write_zeros(&mut row[..kx_lo]);
                         if kx_lo < kx_hi {
                             let src = iy as usize * w + (x0 + kx_lo as isize) as usize;
-                            let pixels = &plane[src..src + kx_hi - kx_lo];
-                            for (d, &p) in row[kx_lo..kx_hi].iter_mut().zip(pixels) {
-                                d.write(p);
-                            }
+                            write_copy(&mut row[kx_lo..kx_hi], &plane[src..src + kx_hi - kx_lo]);
                         }
-                        zero(&mut row[kx_hi..]);
+                        write_zeros(&mut row[kx_hi..]);
                     }
                 }
                 o += patch;
             }
         }
     }
+}
+
+/// `dst = src` into memory that may be uninitialised (a `memcpy`; the element loop the
+/// compiler made of `MaybeUninit::write` was 4 floats a store).
+#[allow(unsafe_code)]
+fn write_copy(dst: &mut [MaybeUninit<f32>], src: &[f32]) {
+    assert_eq!(dst.len(), src.len(), "write_copy lengths");
+    // SAFETY: `MaybeUninit<f32>` has the layout of `f32`; both slices hold `src.len()`
+    // values (asserted) and cannot overlap (one is borrowed mutably).
+    unsafe {
+        std::ptr::copy_nonoverlapping(src.as_ptr(), dst.as_mut_ptr().cast::<f32>(), src.len())
+    }
+}
+
+/// `dst = 0.0` into memory that may be uninitialised (a `memset`).
+#[allow(unsafe_code)]
+fn write_zeros(dst: &mut [MaybeUninit<f32>]) {
+    // SAFETY: the slice is valid for writes of its length; all-zero bits are `0.0f32`.
+    unsafe { std::ptr::write_bytes(dst.as_mut_ptr(), 0, dst.len()) }
 }
 
 #[cfg(test)]
