@@ -466,12 +466,12 @@ impl Learner {
         let (next, now) = (batch_inputs(batch, true), batch_inputs(batch, false));
         // One online pass over s and s' stacked (its weights read once for both; the loss
         // reaches only the s rows), beside the target network's pass over s'.
-        let (tape, target_next) = rayon::join(
-            || online.forward_parts(&[now, next], if aux { b } else { 0 }),
-            || target.q_values(&next),
+        let (tape, (online_next, target_next)) = rayon::join(
+            || online.forward(&now, aux),
+            || rayon::join(|| online.q_values(&next), || target.q_values(&next)),
         );
-        let actions = tape.q().len() / (2 * b).max(1);
-        let y = host_targets(&tape.q()[b * actions..], &target_next, batch, self.gamma);
+        let actions = tape.q().len() / b.max(1);
+        let y = host_targets(&online_next, &target_next, batch, self.gamma);
         let t1 = std::time::Instant::now();
         // Eq. (13): mean over the batch of (y − Q(s, a))²; its gradient reaches Q(s, a) only.
         let mut dq = vec![0.0f32; b * actions];

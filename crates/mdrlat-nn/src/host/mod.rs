@@ -24,7 +24,7 @@ use conv::{
     ConvGeometry, column_sums, patch_product_backward, patch_product_relu, relu_backward,
     relu_in_place,
 };
-use gemm::{Mat, gemm, gemm_new};
+use gemm::{Mat, gemm_new, gemm_short_by_long};
 use rayon::prelude::*;
 
 /// Width of the heads' hidden layers, and the bilinear fusion's `L_d`, `L_l`.
@@ -96,7 +96,7 @@ impl HostLinear {
     fn forward(&self, x: &[f32], batch: usize) -> Vec<f32> {
         let (din, dout) = self.dims();
         let mut y = self.bias.data().repeat(batch);
-        gemm(batch, dout, din, Mat::n(x), Mat::n(self.weight.data()), &mut y, true);
+        gemm_short_by_long(batch, dout, din, x, self.weight.data(), &mut y, true);
         y
     }
 
