@@ -212,13 +212,14 @@ impl StageClock {
 
 /// What a forward pass keeps for its backward pass.
 #[derive(Debug, Default)]
-pub struct Tape {
+pub struct Tape<'a> {
     /// Time of each forward stage.
     pub times: StageClock,
     batch: usize,
-    /// Depth: conv1 patches, and each layer's output (channel-last) and the next layer's
-    /// patches.
-    depth_patches: Vec<f32>,
+    /// Depth: the input images (the first layer's patches are cut again for its weight
+    /// gradient, one image at a time, rather than kept: 23 MB a batch of 32), each layer's
+    /// output (channel-last) and the next layer's patches.
+    depth_images: Vec<&'a [f32]>,
     depth_act: [Vec<f32>; 3],
     depth_cols: [Vec<f32>; 2],
     /// Laser: the three layers' patches and outputs (channel-last).
@@ -239,7 +240,7 @@ pub struct Tape {
     velocity_rows: usize,
 }
 
-impl Tape {
+impl Tape<'_> {
     /// Q-values, `[B, actions]` row-major.
     pub fn q(&self) -> &[f32] {
         &self.q
@@ -417,7 +418,7 @@ impl HostNet {
     ///
     /// # Panics
     /// If an input the variant reads has the wrong size.
-    pub fn forward(&self, x: &HostInputs<'_>, velocity: bool) -> Tape {
+    pub fn forward<'a>(&self, x: &HostInputs<'a>, velocity: bool) -> Tape<'a> {
         self.forward_parts(&[*x], if velocity { x.batch } else { 0 })
     }
 
@@ -426,7 +427,7 @@ impl HostNet {
     ///
     /// # Panics
     /// If an input the variant reads has the wrong size.
-    pub fn forward_parts(&self, parts: &[HostInputs<'_>], velocity_rows: usize) -> Tape {
+    pub fn forward_parts<'a>(&self, parts: &[HostInputs<'a>], velocity_rows: usize) -> Tape<'a> {
         let b: usize = parts.iter().map(|p| p.batch).sum();
         let cfg = &self.config;
         let mut t = Tape { batch: b, times: StageClock::start(), ..Tape::default() };
@@ -434,8 +435,8 @@ impl HostNet {
             || self.depth.as_ref().map(|layers| self.depth_forward(layers, parts, b)).unzip(),
             || self.laser.as_ref().map(|layers| self.laser_forward(layers, parts, b)).unzip(),
         );
-        if let Some((patches, act, cols)) = depth {
-            (t.depth_patches, t.depth_act, t.depth_cols) = (patches, act, cols);
+        if let Some((images, act, cols)) = depth {
+            (t.depth_images, t.depth_act, t.depth_cols) = (images, act, cols);
         }
         if let Some((cols, act)) = laser {
             (t.laser_cols, t.laser_act) = (cols, act);
@@ -494,31 +495,89 @@ impl HostNet {
         t
     }
 
-    /// The depth stream on the stacked `parts`: its patches, each layer's (channel-last)
+    /// The depth stream on the stacked `parts`: the images, each layer's (channel-last)
     /// output, the second and third layers' patches, and the flattened features.
     #[allow(clippy::type_complexity)]
-    fn depth_forward(
+    fn depth_forward<'a>(
         &self,
         [c1, c2, c3]: &[HostConv; 3],
-        parts: &[HostInputs<'_>],
+        parts: &[HostInputs<'a>],
         b: usize,
-    ) -> ((Vec<f32>, [Vec<f32>; 3], [Vec<f32>; 2]), Vec<f32>) {
+    ) -> ((Vec<&'a [f32]>, [Vec<f32>; 3], [Vec<f32>; 2]), Vec<f32>) {
         let cfg = &self.config;
-        let g1 = PatchGeometry::depth_conv1(cfg.frames, cfg.depth_rows, cfg.depth_cols);
-        let mut patches = Vec::with_capacity(b * g1.positions() * g1.patch_len());
+        let image = cfg.frames * cfg.depth_rows * cfg.depth_cols;
+        let mut images = Vec::with_capacity(b);
         for p in parts {
-            let image = cfg.frames * cfg.depth_rows * cfg.depth_cols;
             assert_eq!(p.depth.len(), p.batch * image, "depth input size");
-            g1.extract_append(p.depth, p.batch, &mut patches);
+            images.extend(p.depth.chunks_exact(image.max(1)));
         }
-        let a1 = patch_product_relu(&patches, c1.weight.data(), c1.bias.data(), b * g1.positions());
+        let a1 = self.depth_conv1(c1, &images);
         let mut cols = [Vec::new(), Vec::new()];
         let a2 = self.conv_relu(c2, &a1, b, &mut cols[0]);
         let a3 = self.conv_relu(c3, &a2, b, &mut cols[1]);
         let (p, c) = (c3.geometry.positions(), c3.geometry.out_channels);
         let mut dfeat = vec![0.0; b * p * c];
         flatten_into(&a3, b, p, c, &mut dfeat, p * c, 0);
-        ((patches, [a1, a2, a3], cols), dfeat)
+        ((images, [a1, a2, a3], cols), dfeat)
+    }
+
+    /// The first depth convolution + ReLU, one image at a time: its patches cut transposed
+    /// into a buffer that stays in the core's cache, `yᵀ = W · Pᵀ` (16 × 320, the
+    /// short-by-long product), then laid out channel-last. `[B·positions, 16]`.
+    fn depth_conv1(&self, c1: &HostConv, images: &[&[f32]]) -> Vec<f32> {
+        let g = self.conv1_geometry();
+        let (positions, filters) = (g.positions(), c1.geometry.out_channels);
+        let (w, bias) = (c1.weight.data(), c1.bias.data());
+        let mut out = vec![0.0; images.len() * positions * filters];
+        out.par_chunks_mut(positions * filters).zip(images.par_iter()).for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(patches, yt), (out, image)| {
+                g.extract_transposed(image, patches);
+                yt.clear();
+                yt.extend(bias.iter().flat_map(|&b| std::iter::repeat_n(b, positions)));
+                gemm_short_by_long(filters, positions, g.patch_len(), w, patches, yt, true);
+                for (p, row) in out.chunks_exact_mut(filters).enumerate() {
+                    for (o, v) in row.iter_mut().enumerate() {
+                        *v = yt[o * positions + p].max(0.0);
+                    }
+                }
+            },
+        );
+        out
+    }
+
+    /// The first depth layer's weight gradient `Σ_images dyᵀ · P` (its patches cut again,
+    /// one image at a time), summed in image order, and its bias gradient.
+    fn depth_conv1_backward(
+        &self,
+        c1: &HostConv,
+        images: &[&[f32]],
+        dy: &[f32],
+    ) -> (Vec<f32>, Vec<f32>) {
+        let g = self.conv1_geometry();
+        let (positions, filters, k) = (g.positions(), c1.geometry.out_channels, g.patch_len());
+        let partial: Vec<Vec<f32>> = images
+            .par_iter()
+            .zip(dy.par_chunks(positions * filters))
+            .map_init(Vec::new, |patches, (image, dy)| {
+                g.extract_transposed(image, patches);
+                // dW [16 × 560] = dyᵀ [16 × 320] · P [320 × 560], P stored transposed.
+                gemm_new(filters, k, positions, Mat::t(dy), Mat::t(patches))
+            })
+            .collect();
+        let mut dw = vec![0.0; filters * k];
+        for p in &partial {
+            for (d, v) in dw.iter_mut().zip(p) {
+                *d += v;
+            }
+        }
+        (dw, column_sums(dy, filters))
+    }
+
+    /// The first depth layer's patch geometry.
+    fn conv1_geometry(&self) -> PatchGeometry {
+        let cfg = &self.config;
+        PatchGeometry::depth_conv1(cfg.frames, cfg.depth_rows, cfg.depth_cols)
     }
 
     /// The laser stream on the stacked `parts`: each layer's patches and (channel-last)
@@ -716,9 +775,7 @@ impl HostNet {
         let mut d1 = Vec::new();
         g2.col2im(&dcols, b, &mut d1);
         relu_backward(&mut d1, &tape.depth_act[0]);
-        let rows1 = b * layers[0].geometry.positions();
-        let patches = &tape.depth_patches[..rows1 * layers[0].geometry.patch_len()];
-        let (w1, b1) = patch_product_backward(patches, layers[0].weight.data(), &d1, rows1, None);
+        let (w1, b1) = self.depth_conv1_backward(&layers[0], &tape.depth_images[..b], &d1);
         vec![
             HostGrad::of(&layers[0].weight, w1),
             HostGrad::of(&layers[0].bias, b1),
