@@ -4,6 +4,7 @@
 //! `H = 1` case.
 
 use super::gemm::{Mat, gemm, gemm_new};
+use rayon::prelude::*;
 
 /// Geometry of one convolution layer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,24 +66,29 @@ impl ConvGeometry {
         debug_assert_eq!(x.len(), batch * image);
         cols.clear();
         cols.resize(batch * self.positions() * k, 0.0);
+        if k == 0 || image == 0 {
+            return;
+        }
         let [oh, ow] = self.out();
         let c = self.c;
-        for b in 0..batch {
-            let img = &x[b * image..(b + 1) * image];
-            for y in 0..oh {
-                for xo in 0..ow {
-                    let row = ((b * oh + y) * ow + xo) * k;
-                    for ky in 0..self.kh {
-                        if let Some((iy, lo, hi, ix)) = self.span(y, xo, ky) {
-                            let src = (iy * self.w + ix) * c;
-                            let dst = row + (ky * self.kw + lo) * c;
-                            let len = (hi - lo) * c;
-                            cols[dst..dst + len].copy_from_slice(&img[src..src + len]);
+        // One image per work item.
+        cols.par_chunks_mut(self.positions() * k).zip(x.par_chunks(image)).for_each(
+            |(cols, img)| {
+                for y in 0..oh {
+                    for xo in 0..ow {
+                        let row = (y * ow + xo) * k;
+                        for ky in 0..self.kh {
+                            if let Some((iy, lo, hi, ix)) = self.span(y, xo, ky) {
+                                let src = (iy * self.w + ix) * c;
+                                let dst = row + (ky * self.kw + lo) * c;
+                                let len = (hi - lo) * c;
+                                cols[dst..dst + len].copy_from_slice(&img[src..src + len]);
+                            }
                         }
                     }
                 }
-            }
-        }
+            },
+        );
     }
 
     /// The adjoint of [`ConvGeometry::im2col`]: adds each patch value back onto the input
@@ -91,27 +97,33 @@ impl ConvGeometry {
         let (k, image) = (self.patch_len(), self.h * self.w * self.c);
         dx.clear();
         dx.resize(batch * image, 0.0);
+        if k == 0 || image == 0 {
+            return;
+        }
         let [oh, ow] = self.out();
         let c = self.c;
-        for b in 0..batch {
-            let img = &mut dx[b * image..(b + 1) * image];
-            for y in 0..oh {
-                for xo in 0..ow {
-                    let row = ((b * oh + y) * ow + xo) * k;
-                    for ky in 0..self.kh {
-                        if let Some((iy, lo, hi, ix)) = self.span(y, xo, ky) {
-                            let dst = (iy * self.w + ix) * c;
-                            let src = row + (ky * self.kw + lo) * c;
-                            let len = (hi - lo) * c;
-                            for (d, s) in img[dst..dst + len].iter_mut().zip(&dcols[src..src + len])
-                            {
-                                *d += s;
+        // One image per work item (images do not share input positions).
+        dx.par_chunks_mut(image).zip(dcols.par_chunks(self.positions() * k)).for_each(
+            |(img, dcols)| {
+                for y in 0..oh {
+                    for xo in 0..ow {
+                        let row = (y * ow + xo) * k;
+                        for ky in 0..self.kh {
+                            if let Some((iy, lo, hi, ix)) = self.span(y, xo, ky) {
+                                let dst = (iy * self.w + ix) * c;
+                                let src = row + (ky * self.kw + lo) * c;
+                                let len = (hi - lo) * c;
+                                for (d, s) in
+                                    img[dst..dst + len].iter_mut().zip(&dcols[src..src + len])
+                                {
+                                    *d += s;
+                                }
                             }
                         }
                     }
                 }
-            }
-        }
+            },
+        );
     }
 
     /// A convolution weight `[out, in, kh, kw]` as `[out, kh, kw, in]`, the patches' order.
@@ -166,10 +178,14 @@ pub(crate) fn patch_product_backward(
 ) -> (Vec<f32>, Vec<f32>) {
     let out = dy.len() / rows.max(1);
     let k = w.len() / out.max(1);
-    let dw = gemm_new(out, k, rows, Mat::t(dy), Mat::n(cols));
-    if let Some(dcols) = dcols {
-        *dcols = gemm_new(rows, k, out, Mat::n(dy), Mat::n(w));
-    }
+    let (dw, ()) = rayon::join(
+        || gemm_new(out, k, rows, Mat::t(dy), Mat::n(cols)),
+        || {
+            if let Some(dcols) = dcols {
+                *dcols = gemm_new(rows, k, out, Mat::n(dy), Mat::n(w));
+            }
+        },
+    );
     (dw, column_sums(dy, out))
 }
 
