@@ -573,10 +573,13 @@ impl Learner {
         let dq = vec![1.0 / batch.size.max(1) as f32; tape.q().len()];
         let dvel = aux.then(|| vec![1.0; tape.velocity().len()]);
         let (_, backward) = online.backward_timed(&tape, &dq, dvel.as_deref());
-        if std::env::var_os("MDRLAT_TMP").is_some() { eprintln!("{:?}", backward.stages); }
         let stages = tape.times.stages.iter().map(|&(name, forward_ms)| {
-            let backward_ms =
-                backward.stages.iter().filter(|(b, _)| b.starts_with(name)).map(|(_, ms)| ms).sum::<f64>();
+            let backward_ms = backward
+                .stages
+                .iter()
+                .filter(|(b, _)| b.starts_with(name))
+                .map(|(_, ms)| ms)
+                .sum::<f64>();
             mdrlat_nn::StageTime { name, forward_ms, backward_ms: Some(backward_ms) }
         });
         Some(stages.collect())

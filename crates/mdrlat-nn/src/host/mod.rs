@@ -547,7 +547,8 @@ impl HostNet {
     }
 
     /// The first depth layer's weight gradient `Σ_images dyᵀ · P` (its patches cut again,
-    /// one image at a time), summed in image order, and its bias gradient.
+    /// one image at a time into a buffer that stays in cache), summed in image order, and its
+    /// bias gradient.
     fn depth_conv1_backward(
         &self,
         c1: &HostConv,
@@ -560,9 +561,9 @@ impl HostNet {
             .par_iter()
             .zip(dy.par_chunks(positions * filters))
             .map_init(Vec::new, |patches, (image, dy)| {
-                g.extract_transposed(image, patches);
-                // dW [16 × 560] = dyᵀ [16 × 320] · P [320 × 560], P stored transposed.
-                gemm_new(filters, k, positions, Mat::t(dy), Mat::t(patches))
+                g.extract(image, 1, patches);
+                // dW [16 × 560] = dyᵀ [16 × 320] · P [320 × 560].
+                gemm_new(filters, k, positions, Mat::t(dy), Mat::n(patches))
             })
             .collect();
         let mut dw = vec![0.0; filters * k];
