@@ -82,10 +82,14 @@ impl PatchGeometry {
         let start = out.len();
         out.reserve(batch * per_image);
         let spare = &mut out.spare_capacity_mut()[..batch * per_image];
-        spare
-            .par_chunks_mut(per_image)
-            .zip(images.par_chunks(c * h * w))
-            .for_each(|(out, image)| self.extract_one(image, out));
+        if batch == 1 {
+            self.extract_one(images, spare);
+        } else {
+            spare
+                .par_chunks_mut(per_image)
+                .zip(images.par_chunks(c * h * w))
+                .for_each(|(out, image)| self.extract_one(image, out));
+        }
         // SAFETY: `extract_one` writes every element of its image's chunk (each patch row
         // is filled as zeros, copied pixels, zeros over its full kernel width, for every
         // position, channel and kernel row: `patch_len` values per position), and the
@@ -120,9 +124,15 @@ impl PatchGeometry {
                             write_zeros(row);
                             continue;
                         }
+                        let src = iy as usize * w + (x0 + kx_lo as isize) as usize;
+                        if kx_lo == 0 && kx_hi == kw && kw == 14 {
+                            // The paper's kernel width, inside the image: a copy of known
+                            // length, which the compiler inlines (the patch rows are 56 bytes).
+                            write_copy_n::<14>(row, &plane[src..src + 14]);
+                            continue;
+                        }
                         write_zeros(&mut row[..kx_lo]);
                         if kx_lo < kx_hi {
-                            let src = iy as usize * w + (x0 + kx_lo as isize) as usize;
                             write_copy(&mut row[kx_lo..kx_hi], &plane[src..src + kx_hi - kx_lo]);
                         }
                         write_zeros(&mut row[kx_hi..]);
@@ -190,6 +200,14 @@ fn write_copy(dst: &mut [MaybeUninit<f32>], src: &[f32]) {
     unsafe {
         std::ptr::copy_nonoverlapping(src.as_ptr(), dst.as_mut_ptr().cast::<f32>(), src.len())
     }
+}
+
+/// [`write_copy`] of `N` values, `N` known to the compiler.
+#[allow(unsafe_code)]
+fn write_copy_n<const N: usize>(dst: &mut [MaybeUninit<f32>], src: &[f32]) {
+    assert!(dst.len() == N && src.len() == N, "write_copy_n lengths");
+    // SAFETY: as in `write_copy`, for `N` values (asserted).
+    unsafe { std::ptr::copy_nonoverlapping(src.as_ptr(), dst.as_mut_ptr().cast::<f32>(), N) }
 }
 
 /// `dst = 0.0` into memory that may be uninitialised (a `memset`).

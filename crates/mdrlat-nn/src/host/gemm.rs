@@ -163,34 +163,39 @@ pub(crate) fn gemm_short_by_long(
     assert!(b.len() >= k * n, "gemm: rhs has {} values, needs {k}x{n}", b.len());
     assert!(c.len() >= m * n, "gemm: output has {} values, needs {m}x{n}", c.len());
     #[cfg(target_arch = "x86_64")]
-    if (SHORT_MIN_ROWS..=SHORT_ROWS).contains(&m) && n >= 16 && k > 0 && avx512::available() {
+    if m >= SHORT_MIN_ROWS && (m <= SHORT_ROWS || n <= 16) && n > 0 && k > 0 && avx512::available()
+    {
         let out = avx512::SendPtr(c.as_mut_ptr());
-        let run = |j0: usize, j1: usize| {
-            // SAFETY: rows of `a` (m × k), columns j0..j1 of `b` (k × n) and of `c`
-            // (m × n) are inside their slices (asserted above); `c` is borrowed mutably
-            // for the call, and the two halves below write disjoint columns of it.
+        // Rows i0..i1 and columns j0..j1 of `c`.
+        let run = |(i0, i1): (usize, usize), (j0, j1): (usize, usize)| {
+            // SAFETY: rows i0..i1 of `a` (m × k), columns j0..j1 of `b` (k × n) and that
+            // block of `c` (m × n) are inside their slices (asserted above); `c` is borrowed
+            // mutably for the call, and the two halves below write disjoint blocks of it.
             unsafe {
                 avx512::short_by_long(
-                    m,
+                    i1 - i0,
                     j1 - j0,
                     k,
-                    a.as_ptr(),
+                    a.as_ptr().add(i0 * k),
                     k,
                     b.as_ptr().add(j0),
                     n,
-                    out.get().add(j0),
+                    out.get().add(i0 * n + j0),
                     n,
                     accumulate,
                 );
             }
         };
-        if m * n * k >= PARALLEL_MACS && n >= 2 * avx512::STRIP && rayon::current_num_threads() > 1
-        {
-            // Each output element is still summed by one thread in one order.
+        let parallel = m * n * k >= PARALLEL_MACS && rayon::current_num_threads() > 1;
+        // Each output element is still summed by one thread in one order.
+        if parallel && n >= 2 * avx512::STRIP {
             let half = (n / 2).div_ceil(avx512::STRIP) * avx512::STRIP;
-            rayon::join(|| run(0, half), || run(half, n));
+            rayon::join(|| run((0, m), (0, half)), || run((0, m), (half, n)));
+        } else if parallel && m >= 32 {
+            let half = (m / 2).div_ceil(16) * 16;
+            rayon::join(|| run((0, half), (0, n)), || run((half, m), (0, n)));
         } else {
-            run(0, n);
+            run((0, m), (0, n));
         }
         return;
     }
@@ -255,6 +260,10 @@ mod avx512 {
         ldc: usize,
         accumulate: bool,
     ) {
+        if n <= 16 {
+            unsafe { narrow(m, n, k, a, lda, b, ldb, c, ldc, accumulate) };
+            return;
+        }
         let mut pc = 0;
         while pc < k {
             let kk = KC.min(k - pc);
@@ -303,6 +312,82 @@ mod avx512 {
                 jc += STRIP;
             }
             pc += kk;
+        }
+    }
+
+    /// [`short_by_long`] for `n ≤ 16` (the first depth convolution's 16 filters): one
+    /// vector per row, 16 rows a tile.
+    ///
+    /// # Safety
+    /// As [`short_by_long`].
+    #[target_feature(enable = "avx512f")]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn narrow(
+        m: usize,
+        n: usize,
+        k: usize,
+        a: *const f32,
+        lda: usize,
+        b: *const f32,
+        ldb: usize,
+        c: *mut f32,
+        ldc: usize,
+        accumulate: bool,
+    ) {
+        let masks = [mask(n), 0, 0];
+        let mut pc = 0;
+        while pc < k {
+            let kk = KC.min(k - pc);
+            let add = accumulate || pc > 0;
+            let mut ic = 0;
+            while ic < m {
+                let rows = [16, 8, 4, 2, 1].into_iter().find(|&r| r <= m - ic).unwrap_or(1);
+                let t = Tile {
+                    k: kk,
+                    a: unsafe { a.add(ic * lda + pc) },
+                    lda,
+                    b: unsafe { b.add(pc * ldb) },
+                    ldb,
+                    c: unsafe { c.add(ic * ldc) },
+                    ldc,
+                    masks,
+                    add,
+                    prefetch: None,
+                };
+                unsafe {
+                    match rows {
+                        16 => column::<16>(&t),
+                        8 => column::<8>(&t),
+                        4 => column::<4>(&t),
+                        2 => column::<2>(&t),
+                        _ => column::<1>(&t),
+                    }
+                }
+                ic += rows;
+            }
+            pc += kk;
+        }
+    }
+
+    /// `R` rows × one vector of columns (under `masks[0]`).
+    #[target_feature(enable = "avx512f")]
+    unsafe fn column<const R: usize>(t: &Tile) {
+        let mut acc = [_mm512_setzero_ps(); R];
+        for p in 0..t.k {
+            let bv = unsafe { _mm512_maskz_loadu_ps(t.masks[0], t.b.add(p * t.ldb)) };
+            for (r, acc) in acc.iter_mut().enumerate() {
+                let x = _mm512_set1_ps(unsafe { *t.a.add(r * t.lda + p) });
+                *acc = _mm512_fmadd_ps(x, bv, *acc);
+            }
+        }
+        for (r, &sum) in acc.iter().enumerate() {
+            let at = unsafe { t.c.add(r * t.ldc) };
+            let value = if t.add {
+                _mm512_add_ps(unsafe { _mm512_maskz_loadu_ps(t.masks[0], at) }, sum)
+            } else {
+                sum
+            };
+            unsafe { _mm512_mask_storeu_ps(at, t.masks[0], value) };
         }
     }
 
@@ -374,9 +459,17 @@ mod tests {
     /// block, with and without accumulation.
     #[test]
     fn short_by_long_matches_the_definition() {
-        for (m, n, k) in
-            [(1, 16, 3), (3, 17, 5), (8, 48, 130), (9, 100, 300), (32, 512, 257), (64, 130, 129)]
-        {
+        for (m, n, k) in [
+            (1, 16, 3),
+            (3, 17, 5),
+            (8, 48, 130),
+            (9, 100, 300),
+            (32, 512, 257),
+            (64, 130, 129),
+            (5, 10, 40),
+            (320, 16, 560),
+            (333, 7, 200),
+        ] {
             let a: Vec<f32> = (0..m * k).map(|v| ((v * 7) % 13) as f32 * 0.25 - 1.5).collect();
             let b: Vec<f32> = (0..k * n).map(|v| ((v * 5) % 11) as f32 * 0.125 - 0.6).collect();
             let mut want = vec![0.0f32; m * n];

@@ -521,26 +521,27 @@ impl HostNet {
         ((images, [a1, a2, a3], cols), dfeat)
     }
 
-    /// The first depth convolution + ReLU, one image at a time: its patches cut transposed
-    /// into a buffer that stays in the core's cache, `yᵀ = W · Pᵀ` (16 × 320, the
-    /// short-by-long product), then laid out channel-last. `[B·positions, 16]`.
+    /// The first depth convolution + ReLU, one image at a time: its patches cut into a
+    /// buffer that stays in the core's cache, then `P · Wᵀ + b` (320 × 16, the
+    /// short-by-long kernel's one-vector case), channel-last. `[B·positions, 16]`.
     fn depth_conv1(&self, c1: &HostConv, images: &[&[f32]]) -> Vec<f32> {
         let g = self.conv1_geometry();
-        let (positions, filters) = (g.positions(), c1.geometry.out_channels);
+        let (positions, filters, k) = (g.positions(), c1.geometry.out_channels, g.patch_len());
         let (w, bias) = (c1.weight.data(), c1.bias.data());
-        let mut out = vec![0.0; images.len() * positions * filters];
+        // Wᵀ, [560, 16]: each patch value's weight for the 16 filters, one vector.
+        let mut wt = vec![0.0; w.len()];
+        for (o, row) in w.chunks_exact(k).enumerate() {
+            for (j, &v) in row.iter().enumerate() {
+                wt[j * filters + o] = v;
+            }
+        }
+        let mut out = bias.repeat(images.len() * positions);
         out.par_chunks_mut(positions * filters).zip(images.par_iter()).for_each_init(
-            || (Vec::new(), Vec::new()),
-            |(patches, yt), (out, image)| {
-                g.extract_transposed(image, patches);
-                yt.clear();
-                yt.extend(bias.iter().flat_map(|&b| std::iter::repeat_n(b, positions)));
-                gemm_short_by_long(filters, positions, g.patch_len(), w, patches, yt, true);
-                for (p, row) in out.chunks_exact_mut(filters).enumerate() {
-                    for (o, v) in row.iter_mut().enumerate() {
-                        *v = yt[o * positions + p].max(0.0);
-                    }
-                }
+            Vec::new,
+            |patches, (out, image)| {
+                g.extract(image, 1, patches);
+                gemm_short_by_long(positions, filters, k, patches, &wt, out, true);
+                relu_in_place(out);
             },
         );
         out
