@@ -49,7 +49,7 @@ impl PatchGeometry {
     }
 
     /// Padding before the first row and column (TensorFlow puts the odd pixel after).
-    fn pad_before(&self) -> [usize; 2] {
+    pub fn pad_before(&self) -> [usize; 2] {
         let [or, oc] = self.out();
         let total =
             |out: usize, k: usize, len: usize| ((out - 1) * self.stride + k).saturating_sub(len);

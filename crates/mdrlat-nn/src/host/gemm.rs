@@ -202,6 +202,45 @@ pub(crate) fn gemm_short_by_long(
     gemm(m, n, k, Mat::n(a), Mat::n(b), c, accumulate);
 }
 
+/// Geometry of [`conv16`]: a zero-padded `[channels, rows, cols]` image, a `kh × kw`
+/// kernel at `stride`, and `out_rows × out_cols` outputs.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Conv16 {
+    pub(crate) channels: usize,
+    pub(crate) rows: usize,
+    pub(crate) cols: usize,
+    pub(crate) kh: usize,
+    pub(crate) kw: usize,
+    pub(crate) stride: usize,
+    pub(crate) out_rows: usize,
+    pub(crate) out_cols: usize,
+}
+
+/// A convolution with 16 filters straight from a zero-padded image, no patches:
+/// `out[y·out_cols + x, 0..16] += Σ img[ch][y·s + ky][x·s + kx] · wt[(ch·kh + ky)·kw + kx,
+/// 0..16]` (`wt` is the weight transposed, one 16-float vector per kernel value). `false`
+/// (nothing done) where the CPU lacks AVX-512: the caller cuts patches instead.
+///
+/// # Panics
+/// If the kernel does not fit the padded image or a slice is short.
+#[allow(unsafe_code)]
+pub(crate) fn conv16(g: &Conv16, img: &[f32], wt: &[f32], out: &mut [f32]) -> bool {
+    assert!(g.out_rows > 0 && g.out_cols > 0 && g.stride > 0, "conv16 geometry");
+    assert!((g.out_rows - 1) * g.stride + g.kh <= g.rows, "conv16: kernel rows leave the image");
+    assert!((g.out_cols - 1) * g.stride + g.kw <= g.cols, "conv16: kernel columns leave the image");
+    assert!(img.len() >= g.channels * g.rows * g.cols, "conv16 image size");
+    assert_eq!(wt.len(), g.channels * g.kh * g.kw * 16, "conv16 weight size");
+    assert_eq!(out.len(), g.out_rows * g.out_cols * 16, "conv16 output size");
+    #[cfg(target_arch = "x86_64")]
+    if avx512::available() {
+        // SAFETY: AVX-512F is available; every pixel the kernel reads is inside `img` and every
+        // output inside `out` (asserted above).
+        unsafe { avx512::conv16(g, img.as_ptr(), wt.as_ptr(), out.as_mut_ptr()) };
+        return true;
+    }
+    false
+}
+
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
 mod avx512 {
@@ -388,6 +427,62 @@ mod avx512 {
                 sum
             };
             unsafe { _mm512_mask_storeu_ps(at, t.masks[0], value) };
+        }
+    }
+
+    /// [`super::conv16`]: per output row, tiles of up to 16 consecutive output positions,
+    /// each with its 16 filters in one register, summed over channels, kernel rows and
+    /// kernel columns straight from the image.
+    ///
+    /// # Safety
+    /// AVX-512F must be available and the geometry checked as in [`super::conv16`].
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn conv16(g: &super::Conv16, img: *const f32, wt: *const f32, out: *mut f32) {
+        for y in 0..g.out_rows {
+            let mut x = 0;
+            while x < g.out_cols {
+                let n = [16, 8, 4, 2, 1].into_iter().find(|&r| r <= g.out_cols - x).unwrap_or(1);
+                let base = unsafe { img.add(y * g.stride * g.cols + x * g.stride) };
+                let o = unsafe { out.add((y * g.out_cols + x) * 16) };
+                unsafe {
+                    match n {
+                        16 => conv16_tile::<16>(g, base, wt, o),
+                        8 => conv16_tile::<8>(g, base, wt, o),
+                        4 => conv16_tile::<4>(g, base, wt, o),
+                        2 => conv16_tile::<2>(g, base, wt, o),
+                        _ => conv16_tile::<1>(g, base, wt, o),
+                    }
+                }
+                x += n;
+            }
+        }
+    }
+
+    /// `R` consecutive output positions of one output row.
+    #[target_feature(enable = "avx512f")]
+    unsafe fn conv16_tile<const R: usize>(
+        g: &super::Conv16,
+        base: *const f32,
+        wt: *const f32,
+        out: *mut f32,
+    ) {
+        let mut acc = [_mm512_setzero_ps(); R];
+        for ch in 0..g.channels {
+            for ky in 0..g.kh {
+                let row = unsafe { base.add((ch * g.rows + ky) * g.cols) };
+                let w = unsafe { wt.add((ch * g.kh + ky) * g.kw * 16) };
+                for kx in 0..g.kw {
+                    let wv = unsafe { _mm512_loadu_ps(w.add(kx * 16)) };
+                    for (r, acc) in acc.iter_mut().enumerate() {
+                        let x = _mm512_set1_ps(unsafe { *row.add(r * g.stride + kx) });
+                        *acc = _mm512_fmadd_ps(x, wv, *acc);
+                    }
+                }
+            }
+        }
+        for (r, &sum) in acc.iter().enumerate() {
+            let at = unsafe { out.add(r * 16) };
+            unsafe { _mm512_storeu_ps(at, _mm512_add_ps(_mm512_loadu_ps(at), sum)) };
         }
     }
 

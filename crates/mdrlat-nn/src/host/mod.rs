@@ -24,7 +24,7 @@ use conv::{
     ConvGeometry, column_sums, patch_product_backward, patch_product_relu, relu_backward,
     relu_in_place,
 };
-use gemm::{Mat, gemm_new, gemm_short_by_long};
+use gemm::{Conv16, Mat, conv16, gemm_new, gemm_short_by_long};
 use rayon::prelude::*;
 
 /// Width of the heads' hidden layers, and the bilinear fusion's `L_d`, `L_l`.
@@ -521,9 +521,10 @@ impl HostNet {
         ((images, [a1, a2, a3], cols), dfeat)
     }
 
-    /// The first depth convolution + ReLU, one image at a time: its patches cut into a
-    /// buffer that stays in the core's cache, then `P · Wᵀ + b` (320 × 16, the
-    /// short-by-long kernel's one-vector case), channel-last. `[B·positions, 16]`.
+    /// The first depth convolution + ReLU, one image at a time, channel-last
+    /// (`[B·positions, 16]`): with AVX-512 straight from the zero-padded image (16 filters in
+    /// one register; 0.10 → 0.076 ms an image), else from its patches cut into a buffer
+    /// that stays in the core's cache, `P · Wᵀ + b` by the short-by-long product.
     fn depth_conv1(&self, c1: &HostConv, images: &[&[f32]]) -> Vec<f32> {
         let g = self.conv1_geometry();
         let (positions, filters, k) = (g.positions(), c1.geometry.out_channels, g.patch_len());
@@ -536,11 +537,40 @@ impl HostNet {
             }
         }
         let mut out = bias.repeat(images.len() * positions);
+        // Straight from each zero-padded image where the CPU has AVX-512 and there are 16
+        // filters; else from its patches.
+        let [pt, pl] = g.pad_before();
+        let [oh, ow] = g.out();
+        let [kh, kw] = g.kernel;
+        let direct = Conv16 {
+            channels: g.channels,
+            rows: (oh - 1) * g.stride + kh,
+            cols: (ow - 1) * g.stride + kw,
+            kh,
+            kw,
+            stride: g.stride,
+            out_rows: oh,
+            out_cols: ow,
+        };
+        let (h, w) = (g.rows, g.cols);
         out.par_chunks_mut(positions * filters).zip(images.par_iter()).for_each_init(
-            Vec::new,
-            |patches, (out, image)| {
-                g.extract(image, 1, patches);
-                gemm_short_by_long(positions, filters, k, patches, &wt, out, true);
+            || (Vec::new(), Vec::new()),
+            |(padded, patches), (out, image)| {
+                let done = filters == 16 && pt + h <= direct.rows && pl + w <= direct.cols && {
+                    padded.clear();
+                    padded.resize(direct.channels * direct.rows * direct.cols, 0.0);
+                    for (ch, plane) in image.chunks_exact(h * w).enumerate() {
+                        for (iy, src) in plane.chunks_exact(w).enumerate() {
+                            let at = (ch * direct.rows + pt + iy) * direct.cols + pl;
+                            padded[at..at + w].copy_from_slice(src);
+                        }
+                    }
+                    conv16(&direct, padded, &wt, out)
+                };
+                if !done {
+                    g.extract(image, 1, patches);
+                    gemm_short_by_long(positions, filters, k, patches, &wt, out, true);
+                }
                 relu_in_place(out);
             },
         );
