@@ -144,52 +144,6 @@ impl PatchGeometry {
     }
 }
 
-impl PatchGeometry {
-    /// The patches of one `[channels, rows, cols]` image, transposed: `[patch_len,
-    /// positions]` (row `j` holds patch value `j` of every position), resized into `out`.
-    /// One image's worth (717 KB for the paper's first layer) stays in the core's cache.
-    pub fn extract_transposed(&self, image: &[f32], out: &mut Vec<f32>) {
-        let (c, h, w) = (self.channels, self.rows, self.cols);
-        assert_eq!(image.len(), c * h * w, "patch input size");
-        let [or, oc] = self.out();
-        let [kh, kw] = self.kernel;
-        let [pt, pl] = self.pad_before();
-        let positions = or * oc;
-        out.resize(self.patch_len() * positions, 0.0);
-        let s = self.stride;
-        // The output columns whose input column is inside the image, per kernel column.
-        let inside = |kx: usize| {
-            let lo = pl.saturating_sub(kx).div_ceil(s);
-            let hi = ((w + pl).saturating_sub(kx)).div_ceil(s).min(oc);
-            (lo.min(hi), hi)
-        };
-        for ch in 0..c {
-            let plane = &image[ch * h * w..(ch + 1) * h * w];
-            for ky in 0..kh {
-                for kx in 0..kw {
-                    let j = (ch * kh + ky) * kw + kx;
-                    let row = &mut out[j * positions..(j + 1) * positions];
-                    let (lo, hi) = inside(kx);
-                    for y in 0..or {
-                        let dst = &mut row[y * oc..(y + 1) * oc];
-                        let iy = (y * s + ky).checked_sub(pt).filter(|&iy| iy < h);
-                        let Some(iy) = iy else {
-                            dst.fill(0.0);
-                            continue;
-                        };
-                        let src = &plane[iy * w..(iy + 1) * w];
-                        dst[..lo].fill(0.0);
-                        for (x, d) in dst.iter_mut().enumerate().take(hi).skip(lo) {
-                            *d = src[x * s + kx - pl];
-                        }
-                        dst[hi..].fill(0.0);
-                    }
-                }
-            }
-        }
-    }
-}
-
 /// `dst = src` into memory that may be uninitialised (a `memcpy`; the element loop the
 /// compiler made of `MaybeUninit::write` was 4 floats a store).
 #[allow(unsafe_code)]
@@ -237,14 +191,6 @@ mod tests {
         let paper = PatchGeometry::depth_conv1(4, 128, 160);
         assert_eq!((paper.out(), paper.patch_len()), ([16, 20], 560));
         // Appending cuts the same patches after what is there.
-        // Transposed: value j of position p at j · positions + p.
-        let mut t = vec![f32::NAN; 7];
-        g.extract_transposed(&img, &mut t);
-        for p in 0..9 {
-            for j in 0..9 {
-                assert_eq!(t[j * 9 + p], out[p * 9 + j], "position {p}, value {j}");
-            }
-        }
         let mut appended = vec![f32::NAN; 3];
         g.extract_append(&img, 1, &mut appended);
         assert_eq!(appended.len(), 3 + out.len());

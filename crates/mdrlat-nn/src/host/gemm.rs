@@ -57,6 +57,9 @@ pub(crate) fn gemm(
     unsafe { product(m, n, k, a, b, c.as_mut_ptr(), accumulate) }
 }
 
+/// Outputs from which [`gemm_new`] skips zeroing its memory.
+const UNINIT_MIN: usize = 1 << 16;
+
 /// `a · b` as a new `m × n` row-major matrix. Its memory is written once, by the product
 /// (not zeroed first: the gradients of a step are ~44 MB).
 ///
@@ -67,12 +70,21 @@ pub(crate) fn gemm_new(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) -> 
     if m == 0 || n == 0 || k == 0 {
         return vec![0.0; m * n];
     }
+    if m == 1 || n == 1 || m * n < UNINIT_MIN {
+        // Small, or a vector the `gemm` crate routes to its matrix-vector paths (which view
+        // the destination as a slice): zeroed first.
+        let mut c = vec![0.0; m * n];
+        gemm(m, n, k, a, b, &mut c, false);
+        return c;
+    }
     let mut c = Vec::with_capacity(m * n);
     // SAFETY: the capacity holds `m × n` values and overlaps neither input. Without
     // `read_dst` the `gemm` crate never reads the destination: its first pass over the
     // depth dimension stores `lhs · rhs` into every one of the `m × n` elements (alpha is
     // zeroed and the microkernels' "alpha_status 0" path overwrites; `k > 0` here), later
-    // passes add to what it stored. So every element is initialised before `set_len`.
+    // passes add to what it stored (checked in gemm-common 0.19.0, which `=0.19.0` pins:
+    // alpha is reset per column block, partial tiles only store); matrix-vector shapes never
+    // get here. So every element is initialised before `set_len`.
     unsafe {
         product(m, n, k, a, b, c.as_mut_ptr(), false);
         c.set_len(m * n);
@@ -189,10 +201,10 @@ pub(crate) fn gemm_short_by_long(
         let parallel = m * n * k >= PARALLEL_MACS && rayon::current_num_threads() > 1;
         // Each output element is still summed by one thread in one order.
         if parallel && n >= 2 * avx512::STRIP {
-            let half = (n / 2).div_ceil(avx512::STRIP) * avx512::STRIP;
+            let half = n.div_ceil(avx512::STRIP).div_ceil(2) * avx512::STRIP;
             rayon::join(|| run((0, m), (0, half)), || run((0, m), (half, n)));
         } else if parallel && m >= 32 {
-            let half = (m / 2).div_ceil(16) * 16;
+            let half = m.div_ceil(16).div_ceil(2) * 16;
             rayon::join(|| run((0, half), (0, n)), || run((half, m), (0, n)));
         } else {
             run((0, m), (0, n));
@@ -225,7 +237,10 @@ pub(crate) struct Conv16 {
 /// If the kernel does not fit the padded image or a slice is short.
 #[allow(unsafe_code)]
 pub(crate) fn conv16(g: &Conv16, img: &[f32], wt: &[f32], out: &mut [f32]) -> bool {
-    assert!(g.out_rows > 0 && g.out_cols > 0 && g.stride > 0, "conv16 geometry");
+    assert!(
+        g.out_rows > 0 && g.out_cols > 0 && g.stride > 0 && g.kh > 0 && g.kw > 0 && g.channels > 0,
+        "conv16 geometry"
+    );
     assert!((g.out_rows - 1) * g.stride + g.kh <= g.rows, "conv16: kernel rows leave the image");
     assert!((g.out_cols - 1) * g.stride + g.kw <= g.cols, "conv16: kernel columns leave the image");
     assert!(img.len() >= g.channels * g.rows * g.cols, "conv16 image size");
@@ -253,7 +268,8 @@ mod avx512 {
     pub(super) const STRIP: usize = 48;
     /// Rows of `c` per register tile.
     const ROWS: usize = 8;
-    /// Weight rows per block (48 KB of a 48-column strip... per strip 24 KB).
+    /// Weight rows per block (128 rows × 48 floats: 24 KB of a strip, kept in L1/L2 while
+    /// every row tile of `a` passes over it).
     const KC: usize = 128;
 
     /// A pointer the two halves of a product may share (they write disjoint columns).
@@ -513,11 +529,13 @@ mod avx512 {
                 _mm_prefetch::<_MM_HINT_T0>(q.wrapping_add(16).cast::<i8>());
                 _mm_prefetch::<_MM_HINT_T0>(q.wrapping_add(32).cast::<i8>());
             }
+            // A masked-off vector reads nothing; its address may lie past the row's end
+            // (a tail strip of under 48 columns), so it is computed with `wrapping_add`.
             let (b0, b1, b2) = unsafe {
                 (
                     _mm512_maskz_loadu_ps(t.masks[0], bp),
-                    _mm512_maskz_loadu_ps(t.masks[1], bp.add(16)),
-                    _mm512_maskz_loadu_ps(t.masks[2], bp.add(32)),
+                    _mm512_maskz_loadu_ps(t.masks[1], bp.wrapping_add(16)),
+                    _mm512_maskz_loadu_ps(t.masks[2], bp.wrapping_add(32)),
                 )
             };
             for (r, acc) in acc.iter_mut().enumerate() {
@@ -530,10 +548,12 @@ mod avx512 {
         for (r, acc) in acc.iter().enumerate() {
             let cp = unsafe { t.c.add(r * t.ldc) };
             for (v, &sum) in acc.iter().enumerate() {
-                let (mask, at) = (t.masks[v], unsafe { cp.add(16 * v) });
+                let mask = t.masks[v];
                 if mask == 0 {
                     continue;
                 }
+                // In bounds: a set mask means this vector's first column exists.
+                let at = unsafe { cp.add(16 * v) };
                 let value = if t.add {
                     _mm512_add_ps(unsafe { _mm512_maskz_loadu_ps(mask, at) }, sum)
                 } else {

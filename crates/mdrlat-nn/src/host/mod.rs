@@ -141,6 +141,29 @@ struct HostConv {
 }
 
 impl HostConv {
+    /// A SAME-padded 2D convolution on `h × w` inputs (`None` for strides, dilations or
+    /// groups these kernels do not compute).
+    fn conv2d(l: &burn::nn::conv::Conv2d, h: usize, w: usize) -> Option<Self> {
+        let [out, c, kh, kw] = l.weight.val().dims();
+        let plain = l.stride[0] == l.stride[1] && l.dilation == [1, 1] && l.groups == 1;
+        let same = matches!(l.padding, burn::nn::PaddingConfig2d::Same);
+        let stride = l.stride[0];
+        let geometry = ConvGeometry { h, w, c, kh, kw, stride, out_channels: out };
+        (plain && same).then_some(())?;
+        Self::new(&l.weight, l.bias.as_ref(), geometry)
+    }
+
+    /// A SAME-padded 1D convolution on inputs of `len` (the `H = 1` case).
+    fn conv1d(l: &burn::nn::conv::Conv1d, len: usize) -> Option<Self> {
+        let [out, c, k] = l.weight.val().dims();
+        let plain = l.dilation == 1 && l.groups == 1;
+        let same = matches!(l.padding, burn::nn::PaddingConfig1d::Same);
+        let geometry =
+            ConvGeometry { h: 1, w: len, c, kh: 1, kw: k, stride: l.stride, out_channels: out };
+        (plain && same).then_some(())?;
+        Self::new(&l.weight, l.bias.as_ref(), geometry)
+    }
+
     fn new<const D: usize>(
         weight: &Param<Tensor<D>>,
         bias: Option<&Param<Tensor<1>>>,
@@ -332,67 +355,22 @@ impl HostNet {
     /// Reads the weights of `net` (a `config` network), or `None` where they do not all lie
     /// in host memory as contiguous `f32` (any backend but `flex`).
     pub(crate) fn new(net: &QNet, config: &QNetConfig) -> Option<Self> {
-        let f = config.frames;
         let depth = match &net.depth {
             Some(s) => {
-                let g1 = PatchGeometry::depth_conv1(f, config.depth_rows, config.depth_cols);
-                let [r1, c1] = g1.out();
-                let c1g = ConvGeometry {
-                    h: config.depth_rows,
-                    w: config.depth_cols,
-                    c: f,
-                    kh: 10,
-                    kw: 14,
-                    stride: 8,
-                    out_channels: 16,
-                };
-                let c2g =
-                    ConvGeometry { h: r1, w: c1, c: 16, kh: 4, kw: 4, stride: 2, out_channels: 32 };
-                let [r2, c2] = c2g.out();
-                let c3g =
-                    ConvGeometry { h: r2, w: c2, c: 32, kh: 3, kw: 3, stride: 1, out_channels: 32 };
-                Some([
-                    HostConv::new(&s.c1.weight, s.c1.bias.as_ref(), c1g)?,
-                    HostConv::new(&s.c2.weight, s.c2.bias.as_ref(), c2g)?,
-                    HostConv::new(&s.c3.weight, s.c3.bias.as_ref(), c3g)?,
-                ])
+                let c1 = HostConv::conv2d(&s.c1, config.depth_rows, config.depth_cols)?;
+                let [r1, w1] = c1.geometry.out();
+                let c2 = HostConv::conv2d(&s.c2, r1, w1)?;
+                let [r2, w2] = c2.geometry.out();
+                Some([c1, c2, HostConv::conv2d(&s.c3, r2, w2)?])
             }
             None => None,
         };
         let laser = match &net.laser {
             Some(s) => {
-                let g1 = ConvGeometry {
-                    h: 1,
-                    w: config.beams,
-                    c: f,
-                    kh: 1,
-                    kw: 5,
-                    stride: 4,
-                    out_channels: 16,
-                };
-                let g2 = ConvGeometry {
-                    h: 1,
-                    w: g1.out()[1],
-                    c: 16,
-                    kh: 1,
-                    kw: 3,
-                    stride: 2,
-                    out_channels: 32,
-                };
-                let g3 = ConvGeometry {
-                    h: 1,
-                    w: g2.out()[1],
-                    c: 32,
-                    kh: 1,
-                    kw: 3,
-                    stride: 2,
-                    out_channels: 32,
-                };
-                Some([
-                    HostConv::new(&s.c1.weight, s.c1.bias.as_ref(), g1)?,
-                    HostConv::new(&s.c2.weight, s.c2.bias.as_ref(), g2)?,
-                    HostConv::new(&s.c3.weight, s.c3.bias.as_ref(), g3)?,
-                ])
+                let c1 = HostConv::conv1d(&s.c1, config.beams)?;
+                let c2 = HostConv::conv1d(&s.c2, c1.geometry.out()[1])?;
+                let c3 = HostConv::conv1d(&s.c3, c2.geometry.out()[1])?;
+                Some([c1, c2, c3])
             }
             None => None,
         };
@@ -526,7 +504,7 @@ impl HostNet {
     /// one register; 0.10 → 0.076 ms an image), else from its patches cut into a buffer
     /// that stays in the core's cache, `P · Wᵀ + b` by the short-by-long product.
     fn depth_conv1(&self, c1: &HostConv, images: &[&[f32]]) -> Vec<f32> {
-        let g = self.conv1_geometry();
+        let g = Self::conv1_geometry(c1);
         let (positions, filters, k) = (g.positions(), c1.geometry.out_channels, g.patch_len());
         let (w, bias) = (c1.weight.data(), c1.bias.data());
         // Wᵀ, [560, 16]: each patch value's weight for the 16 filters, one vector.
@@ -586,7 +564,7 @@ impl HostNet {
         images: &[&[f32]],
         dy: &[f32],
     ) -> (Vec<f32>, Vec<f32>) {
-        let g = self.conv1_geometry();
+        let g = Self::conv1_geometry(c1);
         let (positions, filters, k) = (g.positions(), c1.geometry.out_channels, g.patch_len());
         let partial: Vec<Vec<f32>> = images
             .par_iter()
@@ -607,9 +585,15 @@ impl HostNet {
     }
 
     /// The first depth layer's patch geometry.
-    fn conv1_geometry(&self) -> PatchGeometry {
-        let cfg = &self.config;
-        PatchGeometry::depth_conv1(cfg.frames, cfg.depth_rows, cfg.depth_cols)
+    fn conv1_geometry(c1: &HostConv) -> PatchGeometry {
+        let g = c1.geometry;
+        PatchGeometry {
+            channels: g.c,
+            rows: g.h,
+            cols: g.w,
+            kernel: [g.kh, g.kw],
+            stride: g.stride,
+        }
     }
 
     /// The laser stream on the stacked `parts`: each layer's patches and (channel-last)
