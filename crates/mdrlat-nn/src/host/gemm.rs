@@ -315,29 +315,32 @@ mod avx512 {
         ldc: usize,
         accumulate: bool,
     ) {
-        if n <= 16 {
-            unsafe { narrow(m, n, k, a, lda, b, ldb, c, ldc, accumulate) };
-            return;
-        }
+        // Up to 16 columns (the first depth convolution's 16 filters): one vector per row,
+        // 16 rows a tile; else 8 rows × 48 columns.
+        let wide = n > 16;
+        let (tile_rows, strip) = if wide { (ROWS, STRIP) } else { (16, 16) };
         let mut pc = 0;
         while pc < k {
             let kk = KC.min(k - pc);
             let add = accumulate || pc > 0;
             let mut jc = 0;
             while jc < n {
-                let w = STRIP.min(n - jc);
+                let w = strip.min(n - jc);
                 let masks = [mask(w), mask(w.saturating_sub(16)), mask(w.saturating_sub(32))];
                 // What the hardware should fetch while this strip is multiplied: the next
                 // strip of this block, or the first of the next block.
-                let next = if jc + STRIP < n {
-                    b.wrapping_add(pc * ldb + jc + STRIP)
+                let next = if jc + strip < n {
+                    b.wrapping_add(pc * ldb + jc + strip)
                 } else {
                     b.wrapping_add((pc + kk) * ldb)
                 };
-                let more = jc + STRIP < n || pc + kk < k;
+                let more = wide && (jc + strip < n || pc + kk < k);
                 let mut ic = 0;
                 while ic < m {
-                    let rows = ROWS.min(m - ic);
+                    let rows = [16, 8, 4, 2, 1]
+                        .into_iter()
+                        .find(|&r| r <= tile_rows && r <= m - ic)
+                        .unwrap_or(1);
                     let t = Tile {
                         k: kk,
                         a: unsafe { a.add(ic * lda + pc) },
@@ -351,74 +354,21 @@ mod avx512 {
                         prefetch: (more && ic == 0).then_some(next),
                     };
                     unsafe {
-                        match rows {
-                            8 => tile::<8>(&t),
-                            7 => tile::<7>(&t),
-                            6 => tile::<6>(&t),
-                            5 => tile::<5>(&t),
-                            4 => tile::<4>(&t),
-                            3 => tile::<3>(&t),
-                            2 => tile::<2>(&t),
-                            _ => tile::<1>(&t),
+                        match (wide, rows) {
+                            (true, 8) => tile::<8>(&t),
+                            (true, 4) => tile::<4>(&t),
+                            (true, 2) => tile::<2>(&t),
+                            (true, _) => tile::<1>(&t),
+                            (false, 16) => column::<16>(&t),
+                            (false, 8) => column::<8>(&t),
+                            (false, 4) => column::<4>(&t),
+                            (false, 2) => column::<2>(&t),
+                            (false, _) => column::<1>(&t),
                         }
                     }
-                    ic += ROWS;
+                    ic += rows;
                 }
-                jc += STRIP;
-            }
-            pc += kk;
-        }
-    }
-
-    /// [`short_by_long`] for `n ≤ 16` (the first depth convolution's 16 filters): one
-    /// vector per row, 16 rows a tile.
-    ///
-    /// # Safety
-    /// As [`short_by_long`].
-    #[target_feature(enable = "avx512f")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn narrow(
-        m: usize,
-        n: usize,
-        k: usize,
-        a: *const f32,
-        lda: usize,
-        b: *const f32,
-        ldb: usize,
-        c: *mut f32,
-        ldc: usize,
-        accumulate: bool,
-    ) {
-        let masks = [mask(n), 0, 0];
-        let mut pc = 0;
-        while pc < k {
-            let kk = KC.min(k - pc);
-            let add = accumulate || pc > 0;
-            let mut ic = 0;
-            while ic < m {
-                let rows = [16, 8, 4, 2, 1].into_iter().find(|&r| r <= m - ic).unwrap_or(1);
-                let t = Tile {
-                    k: kk,
-                    a: unsafe { a.add(ic * lda + pc) },
-                    lda,
-                    b: unsafe { b.add(pc * ldb) },
-                    ldb,
-                    c: unsafe { c.add(ic * ldc) },
-                    ldc,
-                    masks,
-                    add,
-                    prefetch: None,
-                };
-                unsafe {
-                    match rows {
-                        16 => column::<16>(&t),
-                        8 => column::<8>(&t),
-                        4 => column::<4>(&t),
-                        2 => column::<2>(&t),
-                        _ => column::<1>(&t),
-                    }
-                }
-                ic += rows;
+                jc += strip;
             }
             pc += kk;
         }
