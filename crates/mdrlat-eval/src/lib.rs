@@ -22,7 +22,9 @@ pub use protocol::{
     EpisodeRecord, EvalSettings, Progress, WorldEval, collision_kind, episode_seed,
     eval_sim_config, evaluate_world, world_episodes,
 };
-pub use report::{Timing, WorldSummary, episodes_csv, summary_csv, summary_markdown};
+pub use report::{
+    Timing, WorldSummary, episodes_csv, parse_summary_csv, summary_csv, summary_markdown,
+};
 
 /// Why an evaluation failed.
 #[derive(Debug, thiserror::Error)]

@@ -222,6 +222,73 @@ pub fn summary_csv(rows: &[WorldSummary]) -> String {
     s
 }
 
+/// Splits one CSV line into fields (quoted fields as [`csv_field`] writes them).
+pub fn csv_split(line: &str) -> Vec<String> {
+    let mut fields = Vec::new();
+    let mut cur = String::new();
+    let mut quoted = false;
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                chars.next();
+                cur.push('"');
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => fields.push(std::mem::take(&mut cur)),
+            (c, _) => cur.push(c),
+        }
+    }
+    fields.push(cur);
+    fields
+}
+
+/// Reads back a `summary.csv` (as [`summary_csv`] writes it); `source` names the file in
+/// errors, which give the line and the column.
+pub fn parse_summary_csv(text: &str, source: &str) -> Result<Vec<WorldSummary>, String> {
+    let mut lines = text.lines();
+    match lines.next() {
+        Some(h) if h == SUMMARY_HEADER => {}
+        Some(h) => return Err(format!("{source}:1: not a summary.csv header: '{h}'")),
+        None => return Err(format!("{source}: empty file")),
+    }
+    let mut rows = Vec::new();
+    for (n, line) in lines.enumerate().filter(|(_, l)| !l.is_empty()) {
+        let at = |col: &str, v: &str| format!("{source}:{}: {col} '{v}' is not valid", n + 2);
+        let f = csv_split(line);
+        if f.len() != 15 {
+            return Err(format!("{source}:{}: {} fields, expected 15", n + 2, f.len()));
+        }
+        let num = |i: usize, col: &str| f[i].parse::<f64>().map_err(|_| at(col, &f[i]));
+        let int = |i: usize, col: &str| f[i].parse::<u32>().map_err(|_| at(col, &f[i]));
+        let per_run = if f[8].is_empty() {
+            Vec::new()
+        } else {
+            f[8].split(';')
+                .map(|x| x.parse::<f64>().map_err(|_| at("success_per_run", x)))
+                .collect::<Result<Vec<_>, _>>()?
+        };
+        rows.push(WorldSummary {
+            eval: f[0].clone(),
+            world: f[1].clone(),
+            episodes: int(2, "episodes")?,
+            runs: int(3, "runs")?,
+            max_steps: int(4, "max_steps")?,
+            seed: f[5].parse::<u64>().map_err(|_| at("seed", &f[5]))?,
+            success_mean: num(6, "success_mean")?,
+            success_std: num(7, "success_std")?,
+            success_per_run: per_run,
+            collisions_bumper: int(9, "collisions_bumper")?,
+            collisions_pedestrian: int(10, "collisions_pedestrian")?,
+            collisions_laser: int(11, "collisions_laser")?,
+            steps_mean: num(12, "steps_mean")?,
+            path_m_mean: num(13, "path_m_mean")?,
+            return_mean: num(14, "return_mean")?,
+        });
+    }
+    Ok(rows)
+}
+
 /// `summary.md`: the success table as Markdown, with what the numbers mean; rows of several
 /// methods (the same protocol) get a method column.
 pub fn summary_markdown(rows: &[WorldSummary]) -> String {
@@ -298,6 +365,18 @@ mod tests {
             path_m_mean: 5.0,
             return_mean: 10.0,
         }
+    }
+
+    #[test]
+    fn summary_csv_reads_back_what_it_wrote() {
+        let rows = vec![summary("wander", 0.15), summary("mdrlat, \"s0\"", 0.5)];
+        let text = summary_csv(&rows);
+        let back = parse_summary_csv(&text, "s.csv").expect("parses");
+        assert_eq!(summary_csv(&back), text);
+        assert_eq!(back[1].eval, rows[1].eval);
+        let e = parse_summary_csv(&text.replace("0.150000", "x"), "s.csv").expect_err("bad");
+        assert!(e.contains("s.csv:2") && e.contains("success_mean"), "{e}");
+        assert!(parse_summary_csv("a,b\n", "s.csv").expect_err("header").contains("s.csv:1"));
     }
 
     #[test]

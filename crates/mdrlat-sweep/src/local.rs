@@ -1,0 +1,195 @@
+//! The local executor: every job a child process of the same `mdrlat` binary
+//! (`mdrlat reproduce --out DIR --job ID`), N at a time, the cores split between them.
+//! Finished jobs are skipped; a job whose needs failed is not run; the tables are written
+//! last in any case (saying which cells are missing and why).
+
+use crate::SweepError;
+use crate::plan::{Job, JobKind, JobState, Plan};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// What the executor reports as it goes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// A job was already finished.
+    Skipped(String),
+    /// A job started (id, whether it resumes an interrupted attempt).
+    Started(String, bool),
+    /// A job ended (id, success, seconds).
+    Finished(String, bool, f64),
+}
+
+/// How the local executor runs.
+#[derive(Debug, Clone)]
+pub struct LocalOptions {
+    /// Jobs at a time.
+    pub jobs: usize,
+    /// CPU cores to split between them.
+    pub cores: usize,
+}
+
+impl LocalOptions {
+    /// Cores of one job (at least 1).
+    pub fn threads(&self) -> usize {
+        (self.cores / self.jobs.max(1)).max(1)
+    }
+}
+
+/// The command line of a job's process.
+pub fn job_command(exe: &Path, plan: &Plan, job: &Job, threads: usize) -> Command {
+    let mut c = Command::new(exe);
+    c.arg("reproduce")
+        .arg("--out")
+        .arg(&plan.dir)
+        .arg("--job")
+        .arg(&job.id)
+        .arg("--threads")
+        .arg(threads.to_string())
+        .env("RAYON_NUM_THREADS", threads.to_string());
+    c
+}
+
+fn ready(plan: &Plan, job: &Job, running: &[(String, Child, Instant)]) -> bool {
+    if running.iter().any(|r| r.0 == job.id) {
+        return false;
+    }
+    match job.kind {
+        // The tables come last, once nothing else can run.
+        JobKind::Tables => false,
+        _ => job.needs.iter().all(|n| plan.job(n).is_ok_and(|n| plan.state(n) == JobState::Done)),
+    }
+}
+
+/// Runs every unfinished job of `plan` with the `mdrlat` binary `exe`; returns the jobs
+/// that failed or could not run (each with its log), also as the error.
+pub fn run(
+    plan: &Plan,
+    exe: &Path,
+    opts: &LocalOptions,
+    mut on_event: impl FnMut(&Event),
+) -> Result<(), SweepError> {
+    plan.open()?;
+    let threads = opts.threads();
+    let mut attempted: Vec<String> = Vec::new();
+    let mut running: Vec<(String, Child, Instant)> = Vec::new();
+    for job in &plan.jobs {
+        if plan.state(job) == JobState::Done {
+            on_event(&Event::Skipped(job.id.clone()));
+        }
+    }
+    loop {
+        while running.len() < opts.jobs.max(1) {
+            let next = plan.jobs.iter().find(|j| {
+                !attempted.contains(&j.id)
+                    && plan.state(j) != JobState::Done
+                    && ready(plan, j, &running)
+            });
+            let Some(job) = next else { break };
+            attempted.push(job.id.clone());
+            running.push((
+                job.id.clone(),
+                spawn(plan, exe, job, threads, &mut on_event)?,
+                Instant::now(),
+            ));
+        }
+        if running.is_empty() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+        let mut i = 0;
+        while i < running.len() {
+            let status = running[i].1.try_wait().map_err(|e| SweepError::Io {
+                what: format!("waiting for job {}", running[i].0),
+                source: e,
+            })?;
+            match status {
+                Some(status) => {
+                    let (id, _, started) = running.swap_remove(i);
+                    let job = plan.job(&id)?;
+                    let ok = status.success() && plan.state(job) == JobState::Done;
+                    if !ok && !matches!(plan.state(job), JobState::Failed(_)) {
+                        plan.mark_failed(
+                            job,
+                            &format!("{status}; log {}", plan.log_path(job).display()),
+                        )?;
+                    }
+                    on_event(&Event::Finished(id, ok, started.elapsed().as_secs_f64()));
+                }
+                None => i += 1,
+            }
+        }
+    }
+    // The tables, whatever happened before: a partial table says what it lacks.
+    let tables = plan.job("tables")?;
+    if plan.state(tables) != JobState::Done {
+        let mut child = spawn(plan, exe, tables, threads, &mut on_event)?;
+        let started = Instant::now();
+        let status = child
+            .wait()
+            .map_err(|e| SweepError::Io { what: "waiting for the tables job".into(), source: e })?;
+        let ok = status.success() && plan.state(tables) == JobState::Done;
+        if !ok && !matches!(plan.state(tables), JobState::Failed(_)) {
+            plan.mark_failed(
+                tables,
+                &format!("{status}; log {}", plan.log_path(tables).display()),
+            )?;
+        }
+        on_event(&Event::Finished(tables.id.clone(), ok, started.elapsed().as_secs_f64()));
+    }
+    outcome(plan)
+}
+
+fn spawn(
+    plan: &Plan,
+    exe: &Path,
+    job: &Job,
+    threads: usize,
+    on_event: &mut impl FnMut(&Event),
+) -> Result<Child, SweepError> {
+    let resumes = plan.state(job) == JobState::Partial;
+    plan.clear_failed(job)?;
+    let log_path = plan.log_path(job);
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&log_path)
+        .map_err(|e| crate::plan::io(&log_path, e))?;
+    let err = log.try_clone().map_err(|e| crate::plan::io(&log_path, e))?;
+    let child = job_command(exe, plan, job, threads)
+        .stdin(Stdio::null())
+        .stdout(log)
+        .stderr(err)
+        .spawn()
+        .map_err(|e| SweepError::Io {
+            what: format!("starting {} for job {}", exe.display(), job.id),
+            source: e,
+        })?;
+    on_event(&Event::Started(job.id.clone(), resumes));
+    Ok(child)
+}
+
+/// Every job not finished, with why and its log; `Ok` when none.
+pub fn outcome(plan: &Plan) -> Result<(), SweepError> {
+    let unfinished: Vec<String> = plan
+        .jobs
+        .iter()
+        .filter_map(|j| match plan.state(j) {
+            JobState::Done => None,
+            JobState::Failed(why) => Some(format!("{} failed ({why})", j.id)),
+            _ => {
+                let log = plan.log_path(j);
+                let blocked = j
+                    .needs
+                    .iter()
+                    .filter_map(|n| plan.job(n).ok())
+                    .find(|n| plan.state(n) != JobState::Done);
+                Some(match blocked {
+                    Some(n) => format!("{} not run ({} did not finish)", j.id, n.id),
+                    None => format!("{} did not finish (log {})", j.id, log.display()),
+                })
+            }
+        })
+        .collect();
+    if unfinished.is_empty() { Ok(()) } else { Err(SweepError::Failed(unfinished)) }
+}
