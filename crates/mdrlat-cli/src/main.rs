@@ -55,6 +55,10 @@ enum Command {
     /// Evaluates a trained run or a scripted policy by the paper's protocol: success rate
     /// (no collision within 300 steps) over 5 runs of 50 seeded episodes per world.
     Eval(cmd::eval::Args),
+    /// The paper's evaluation section in one command: trains the six variants, evaluates
+    /// them in the unseen worlds, writes Table 2 beside the paper's numbers, Fig. 4 and a
+    /// report. Resumable; runs here or on a Slurm cluster.
+    Reproduce(cmd::reproduce::Args),
     /// Draws smoothed training curves of runs (paper Fig. 4) as a PNG.
     Plot(cmd::plot::Args),
     /// Drives a robot with a trained policy as a ROS 1 node: laser, depth and odometry in,
@@ -117,9 +121,19 @@ pub fn emit(args: std::fmt::Arguments) {
     }
 }
 
-fn main() -> ExitCode {
-    let cli = Cli::parse();
-    let result = match cli.command {
+/// Parses an `mdrlat` command line (without the program name) and runs it in this process:
+/// how a sweep's job runs the very commands a user would type.
+pub fn run_argv(args: &[String]) -> anyhow::Result<()> {
+    let cli =
+        Cli::try_parse_from(std::iter::once("mdrlat".to_string()).chain(args.iter().cloned()))
+            .map_err(|e| {
+                anyhow::anyhow!("mdrlat {}: {}", args.join(" "), e.to_string().trim_end())
+            })?;
+    dispatch(cli.command)
+}
+
+fn dispatch(command: Command) -> anyhow::Result<()> {
+    match command {
         Command::Demo(a) => cmd::demo::run(&a),
         Command::Eval(a) => cmd::eval::run(&a),
         Command::Worlds => cmd::worlds::list(),
@@ -139,8 +153,13 @@ fn main() -> ExitCode {
             Ok(())
         }
         Command::Config(ConfigCommand::Check { file }) => config::check(&file),
-    };
-    match result {
+        Command::Reproduce(a) => cmd::reproduce::run(&a),
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match dispatch(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");

@@ -217,7 +217,7 @@ impl Plan {
             }
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
                 if self.dir.exists()
-                    && std::fs::read_dir(&self.dir).map_or(false, |mut d| d.next().is_some())
+                    && std::fs::read_dir(&self.dir).is_ok_and(|mut d| d.next().is_some())
                 {
                     return Err(SweepError::NotASweep(self.dir.clone()));
                 }

@@ -113,10 +113,10 @@ pub fn scripts(plan: &Plan, exe: &Path, opts: &SlurmOptions) -> Vec<Script> {
     if !eval.is_empty() {
         out.push(script(plan, exe, "eval", &eval, opts));
     }
-    if let Ok(t) = plan.job("tables") {
-        if plan.state(t) != JobState::Done || !out.is_empty() {
-            out.push(script(plan, exe, "tables", &[t], opts));
-        }
+    if let Ok(t) = plan.job("tables")
+        && (plan.state(t) != JobState::Done || !out.is_empty())
+    {
+        out.push(script(plan, exe, "tables", &[t], opts));
     }
     out
 }

@@ -186,10 +186,10 @@ impl Sweep {
         if let Some(b) = duplicate(&e.baselines) {
             return Err(format!("eval.baselines: '{b}' is listed twice"));
         }
-        if let Some(v) = e.figure_variant {
-            if !self.variants.contains(&v) {
-                return Err(format!("eval.figure_variant '{v}': not one of the sweep's variants"));
-            }
+        if let Some(v) = e.figure_variant
+            && !self.variants.contains(&v)
+        {
+            return Err(format!("eval.figure_variant '{v}': not one of the sweep's variants"));
         }
         if e.figures > 100 {
             return Err(format!("eval.figures = {}: at most 100", e.figures));

@@ -8,8 +8,11 @@ use mdrlat_eval::{WorldSummary, parse_summary_csv, report::csv_field};
 use mdrlat_nn::Variant;
 use std::fmt::Write as _;
 
+/// A world's row of the paper's Table 2: (variant, mean %, std %) per method.
+pub type PaperRow = [(Variant, f64, f64); 6];
+
 /// The paper's Table 2 (mean, std in percent): Env1–3 are `office`, `furnished`, `crowd`.
-pub const PAPER_TABLE2: [(&str, [(Variant, f64, f64); 6]); 3] = [
+pub const PAPER_TABLE2: [(&str, PaperRow); 3] = [
     (
         "office",
         [
@@ -528,7 +531,9 @@ mod tests {
         let csv = t.csv();
         assert_eq!(csv.lines().count(), 1 + 3 * 7, "{csv}");
         assert!(
-            csv.contains("office,multi,0,0,,,,76.8,4.1,eval/multi-s0 failed (exit status: 1; log logs/"),
+            csv.contains(
+                "office,multi,0,0,,,,76.8,4.1,eval/multi-s0 failed (exit status: 1; log logs/"
+            ),
             "{csv}"
         );
         assert!(csv.contains("eval/mdrlat-s0 not run (train/mdrlat-s0 not finished)"), "{csv}");

@@ -181,7 +181,8 @@ pub fn evaluate(
     step: u64,
 ) -> Result<Evaluation, TrainError> {
     let eval_error = |source| TrainError::Evaluation { step, source };
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    // The run's share of the cores (RAYON_NUM_THREADS when a sweep runs several at once).
+    let threads = rayon::current_num_threads();
     // A thread pool that cannot start is the policy's failure, not an observer's.
     let mut policy = learner
         .greedy_policy(threads)

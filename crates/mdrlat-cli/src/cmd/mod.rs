@@ -8,6 +8,7 @@ pub mod eval;
 pub mod observe;
 pub mod plot;
 pub mod render;
+pub mod reproduce;
 pub mod rollout;
 pub mod ros;
 pub mod train;
