@@ -87,11 +87,20 @@ pub struct Cell {
     pub per_run: Vec<f64>,
     /// Each seed's mean success rate (fractions), in seed order.
     pub per_seed: Vec<f64>,
+    /// Each seed's mean distance driven per episode, metres (a policy that turns in place
+    /// never collides: success alone cannot tell it from one that drives).
+    pub path_m: Vec<f64>,
     /// Evaluations missing from this cell, with why (job id: reason).
     pub missing: Vec<String>,
 }
 
 impl Cell {
+    /// Mean distance driven per episode over the seeds, metres.
+    pub fn path_mean(&self) -> Option<f64> {
+        (!self.path_m.is_empty() && self.missing.is_empty())
+            .then(|| self.path_m.iter().sum::<f64>() / self.path_m.len() as f64)
+    }
+
     /// Mean and population std over all runs of all seeds, percent.
     pub fn stats(&self) -> Option<(f64, f64)> {
         if self.per_run.is_empty() || !self.missing.is_empty() {
@@ -171,6 +180,7 @@ impl Table2 {
                     method: method.clone(),
                     per_run: Vec::new(),
                     per_seed: Vec::new(),
+                    path_m: Vec::new(),
                     missing: Vec::new(),
                 };
                 for id in ids {
@@ -180,6 +190,7 @@ impl Table2 {
                         Some(r) => {
                             cell.per_run.extend(&r.success_per_run);
                             cell.per_seed.push(r.success_mean);
+                            cell.path_m.push(r.path_m_mean);
                         }
                         None => cell.missing.push(why_missing(plan, job)),
                     }
@@ -220,7 +231,7 @@ impl Table2 {
     /// `table2.csv`: one row per (world, method); results only.
     pub fn csv(&self) -> String {
         let mut s = String::from(
-            "world,method,seeds,runs,success_mean_pct,success_std_pct,success_per_seed_pct,paper_mean_pct,paper_std_pct,missing\n",
+            "world,method,seeds,runs,success_mean_pct,success_std_pct,success_per_seed_pct,paper_mean_pct,paper_std_pct,path_m_mean,missing\n",
         );
         for c in &self.cells {
             let (mean, std) = c.stats().map_or((String::new(), String::new()), |(m, d)| {
@@ -237,12 +248,13 @@ impl Table2 {
                 c.per_seed.iter().map(|x| format!("{:.2}", 100.0 * x)).collect();
             let _ = writeln!(
                 s,
-                "{},{},{},{},{mean},{std},{},{pm},{ps},{}",
+                "{},{},{},{},{mean},{std},{},{pm},{ps},{},{}",
                 csv_field(&c.world),
                 csv_field(&c.method.name()),
                 c.per_seed.len(),
                 c.per_run.len(),
                 seeds.join(";"),
+                c.path_mean().map_or(String::new(), |p| format!("{p:.3}")),
                 csv_field(&c.missing.join("; "))
             );
         }
@@ -302,6 +314,28 @@ impl Table2 {
                     Method::Baseline(_) => String::new(),
                 };
                 let _ = write!(s, " {ours}{paper} |");
+            }
+            s.push('\n');
+        }
+        let _ = writeln!(
+            s,
+            "\nMean distance driven per episode (m): success counts episodes without a collision, so a \
+             policy that turns in place succeeds; this row tells it from one that drives.\n"
+        );
+        let _ = write!(s, "| world |");
+        for m in &self.methods {
+            let _ = write!(s, " {} |", m.name());
+        }
+        let _ = write!(s, "\n| --- |");
+        for _ in &self.methods {
+            let _ = write!(s, " --- |");
+        }
+        s.push('\n');
+        for w in &self.worlds {
+            let _ = write!(s, "| {} |", w.replace('|', "\\|"));
+            for m in &self.methods {
+                let p = self.cell(w, m).and_then(Cell::path_mean);
+                let _ = write!(s, " {} |", p.map_or("—".into(), |p| format!("{p:.1}")));
             }
             s.push('\n');
         }
@@ -494,6 +528,7 @@ mod tests {
                 method: Method::Variant(v),
                 per_run: vec![x - 0.01, x + 0.01],
                 per_seed: vec![x],
+                path_m: vec![10.0],
                 missing: Vec::new(),
             })
             .collect();
@@ -532,7 +567,7 @@ mod tests {
         assert_eq!(csv.lines().count(), 1 + 3 * 7, "{csv}");
         assert!(
             csv.contains(
-                "office,multi,0,0,,,,76.8,4.1,eval/multi-s0 failed (exit status: 1; log logs/"
+                "office,multi,0,0,,,,76.8,4.1,,eval/multi-s0 failed (exit status: 1; log logs/"
             ),
             "{csv}"
         );

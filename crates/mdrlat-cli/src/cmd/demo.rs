@@ -1,6 +1,7 @@
 //! `mdrlat demo`: the first thing a new user runs. A seeded episode in a built-in world,
-//! rendered to a GIF and pictures, a small success table of the scripted baselines, every
-//! built-in world drawn, and the simulator benchmark.
+//! rendered to a GIF and pictures; the paper's pipeline shortened (train MDRLAT a few
+//! hundred steps, evaluate it beside the scripted baselines in an unseen world, a small
+//! table); every built-in world drawn; and the simulator benchmark.
 
 use super::bench::{SimArgs, cpu_model, measure};
 use super::rollout::{Recorder, parse_scripted, single_env};
@@ -8,9 +9,12 @@ use super::{ensure_dir, load_world, px_per_m};
 use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result};
-use mdrlat_eval::{EvalSettings, WorldSummary, evaluate_world, summary_markdown};
+use mdrlat_nn::Variant;
 use mdrlat_render::{Scene, top_view};
 use mdrlat_sim::{EpisodeSpec, Scripted};
+use mdrlat_sweep::local::{Event, LocalOptions};
+use mdrlat_sweep::tables::Table2;
+use mdrlat_sweep::{EvalSpec, Plan, Sweep};
 use std::path::PathBuf;
 
 /// Arguments of `mdrlat demo`.
@@ -32,9 +36,74 @@ pub struct Args {
     /// Output directory.
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
+    /// Training steps of the pipeline's MDRLAT model (0: skip training and evaluation).
+    #[arg(long, default_value_t = 300)]
+    train_steps: u64,
     /// Seconds per benchmark measurement (0: skip the benchmark).
     #[arg(long, default_value_t = 1.0)]
     bench_seconds: f64,
+}
+
+/// Trains, evaluates and tabulates through a one-variant sweep in `OUT/reproduce`.
+fn pipeline(a: &Args) -> Result<()> {
+    let smoke = Sweep::preset("smoke")?;
+    let sweep = Sweep {
+        name: "demo".into(),
+        description: format!(
+            "MDRLAT trained {} steps, then evaluated with the scripted baselines in office",
+            a.train_steps
+        ),
+        variants: vec![Variant::Mdrlat],
+        seeds: vec![0],
+        steps: a.train_steps,
+        eval: EvalSpec {
+            worlds: vec!["office".into()],
+            episodes: 10,
+            runs: 2,
+            baselines: vec!["wander".into(), "random".into()],
+            figure_variant: Some(Variant::Mdrlat),
+            figures: 1,
+            ..smoke.eval.clone()
+        },
+        ..smoke
+    };
+    sweep.validate().map_err(|e| anyhow::anyhow!("demo sweep: {e}"))?;
+    let dir = a.out.join("reproduce");
+    // The demo's own folder from an earlier demo: start it again.
+    if dir.join("sweep.toml").exists() {
+        std::fs::remove_dir_all(&dir)
+            .with_context(|| format!("cannot clear the earlier demo's {}", dir.display()))?;
+    }
+    let plan = Plan::new(sweep, &dir);
+    let exe = std::env::current_exe().context("cannot find the mdrlat binary's own path")?;
+    let opts = LocalOptions {
+        jobs: 1,
+        cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    out!(
+        "\npipeline: MDRLAT trained {} steps in 'train', evaluated with wander and random in 'office' \
+         ({} runs x {} episodes; `mdrlat reproduce --preset paper` runs the paper's whole protocol):",
+        a.train_steps,
+        plan.sweep.eval.runs,
+        plan.sweep.eval.episodes
+    );
+    let pb = progress::bar(plan.jobs.len() as u64, "pipeline");
+    let result = mdrlat_sweep::local::run(&plan, &exe, &opts, |e| {
+        if let Event::Finished(id, ok, secs) = e {
+            pb.inc(1);
+            pb.suspend(|| out!("  {:<8} {id} ({secs:.0} s)", if *ok { "done" } else { "FAILED" }));
+        }
+    });
+    pb.finish_and_clear();
+    result?;
+    let table = Table2::gather(&plan)?;
+    for c in &table.cells {
+        let cell = c.stats().map_or("—".into(), |(m, s)| format!("{m:.1} ± {s:.1} %"));
+        let path = c.path_mean().map_or("—".into(), |p| format!("{p:.1} m"));
+        out!("  {:<8} success {cell:<14} driven per episode {path}", c.method.name());
+    }
+    out!("  {0}/table2.md, report.md, fig4.png, eval/mdrlat-s0/figures/", dir.display());
+    Ok(())
 }
 
 /// Runs `mdrlat demo`.
@@ -91,32 +160,12 @@ pub fn run(a: &Args) -> Result<()> {
         a.out.join("end.png").display()
     );
 
-    // The measuring instrument of the paper's Table 2, shortened: scripted baselines in an
-    // unseen world, the same starts for both.
-    let settings =
-        EvalSettings { episodes: 10, runs: 2, sim_threads: 0, ..EvalSettings::default() };
-    let office = load_world("office")?;
-    let mut rows = Vec::new();
-    for p in [Scripted::Wander, Scripted::Random] {
-        let mut policy = p.build(&config.sim, 0);
-        let e = evaluate_world(&office, &config.sim, policy.as_mut(), &settings, &mut |_| {})?;
-        rows.push(WorldSummary::new(p.name(), &e, &settings));
+    // The paper's pipeline, shortened: train MDRLAT a few hundred steps, evaluate it and
+    // the scripted baselines in the unseen `office` world (the same starts for all), and
+    // write the table beside the paper's, through the same sweep `mdrlat reproduce` runs.
+    if a.train_steps > 0 {
+        pipeline(a)?;
     }
-    let eval_dir = a.out.join("eval");
-    ensure_dir(&eval_dir)?;
-    let table = eval_dir.join("summary.md");
-    std::fs::write(&table, summary_markdown(&rows))
-        .with_context(|| format!("cannot write {}", table.display()))?;
-    out!(
-        "\nsuccess in 'office' (no collision in {} steps, {} runs x {} episodes; `mdrlat eval` runs the paper's 5 x 50):",
-        settings.max_steps,
-        settings.runs,
-        settings.episodes
-    );
-    for r in &rows {
-        out!("  {:<8} {} %", r.eval, r.success_cell());
-    }
-    out!("  {}", table.display());
 
     let worlds_dir = a.out.join("worlds");
     ensure_dir(&worlds_dir)?;
