@@ -59,6 +59,9 @@ enum Command {
     /// them in the unseen worlds, writes Table 2 beside the paper's numbers, Fig. 4 and a
     /// report. Resumable; runs here or on a Slurm cluster.
     Reproduce(cmd::reproduce::Args),
+    /// Writes a trained run's network as a model folder to ship: model.safetensors (f16 by
+    /// default) and a README with its Q-value difference to f32 and its success table.
+    Export(cmd::export::Args),
     /// Draws smoothed training curves of runs (paper Fig. 4) as a PNG.
     Plot(cmd::plot::Args),
     /// Drives a robot with a trained policy as a ROS 1 node: laser, depth and odometry in,
@@ -154,6 +157,7 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         }
         Command::Config(ConfigCommand::Check { file }) => config::check(&file),
         Command::Reproduce(a) => cmd::reproduce::run(&a),
+        Command::Export(a) => cmd::export::run(&a),
     }
 }
 

@@ -238,6 +238,15 @@ fn presets_print_and_bad_input_is_one_clear_line() {
         &mdrlat(&["reproduce", "--out", dir.join("nothing").to_str().unwrap_or_default()]),
         &["--preset or --sweep"],
     );
+    // Exporting what is not a run.
+    let o = mdrlat(&[
+        "export",
+        "--checkpoint",
+        "/nonexistent/run",
+        "--out",
+        dir.join("m").to_str().unwrap_or_default(),
+    ]);
+    assert_clean_failure(&o, &["/nonexistent/run"]);
     // Slurm's tools missing: one line naming the tool, not a panic.
     let f = sweep_file(&dir);
     let o = Command::new(EXE)

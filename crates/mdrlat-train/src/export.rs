@@ -5,21 +5,57 @@
 //! `fusion.laser`, `fusion.out` (bilinear fusion), `value.hidden`, `value.out`,
 //! `advantage.hidden`, `advantage.out`, `velocity.hidden`, `velocity.out` (heads), each with
 //! `.weight` and `.bias`. Linear weights are stored `[out, in]` as `torch.nn.Linear` expects.
-//! The metadata records the variant and the input layout.
+//! The metadata records the variant and the input layout. A model can be stored in f16 to
+//! ship it (half the bytes) and is read back into f32 ([`load_safetensors`]).
 
-use mdrlat_nn::QNet;
-use mdrlat_nn::Variant;
-use mdrlat_nn::burn::store::{BurnToPyTorchAdapter, ModuleSnapshot, SafetensorsStore};
+use mdrlat_nn::burn::prelude::Device;
+use mdrlat_nn::burn::store::{
+    BurnToPyTorchAdapter, FloatCastAdapter, ModuleAdapter, ModuleSnapshot, PyTorchToBurnAdapter,
+    SafetensorsStore,
+};
+use mdrlat_nn::burn::tensor::DType;
+use mdrlat_nn::{QNet, QNetConfig, Variant};
+use std::collections::BTreeMap;
+use std::io::Read;
 use std::path::Path;
 
-/// Writes `net` to `path` in safetensors format.
+/// How a model file stores its weights.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Precision {
+    /// 32-bit floats, as trained.
+    F32,
+    /// IEEE half precision: half the size, for shipping a model (loaded back as f32).
+    F16,
+}
+
+/// Writes `net` to `path` in safetensors format (f32).
 ///
 /// # Errors
 /// The file cannot be written.
 pub fn save_safetensors(net: &QNet, variant: Variant, path: &Path) -> Result<(), String> {
-    let mut store = SafetensorsStore::from_file(path)
-        .overwrite(true)
-        .with_to_adapter(BurnToPyTorchAdapter)
+    save_safetensors_as(net, variant, path, Precision::F32, &[])
+}
+
+/// Writes `net` to `path` in safetensors format in `precision`, with `extra` metadata
+/// (e.g. `mdrlat_step`) beside the variant and the input layout.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn save_safetensors_as(
+    net: &QNet,
+    variant: Variant,
+    path: &Path,
+    precision: Precision,
+    extra: &[(&str, String)],
+) -> Result<(), String> {
+    let mut store = SafetensorsStore::from_file(path).overwrite(true);
+    store = match precision {
+        Precision::F32 => store.with_to_adapter(BurnToPyTorchAdapter),
+        Precision::F16 => {
+            store.with_to_adapter(BurnToPyTorchAdapter.chain(FloatCastAdapter::to(DType::F16)))
+        }
+    };
+    let mut store = store
         .metadata("mdrlat_variant", variant.name())
         .metadata(
             "mdrlat_inputs",
@@ -29,8 +65,127 @@ pub fn save_safetensors(net: &QNet, variant: Variant, path: &Path) -> Result<(),
             "mdrlat_outputs",
             "q [B,10] (Table 1 actions); velocity [B,6] (v,w at t-2,t-1,t)",
         );
+    for (k, v) in extra {
+        store = store.metadata(*k, v.clone());
+    }
     net.save_into(&mut store).map_err(|e| format!("{}: {e}", path.display()))?;
     canonical_header(path)
+}
+
+/// The `__metadata__` map of a safetensors file.
+///
+/// # Errors
+/// The file is missing or not safetensors.
+pub fn safetensors_metadata(path: &Path) -> Result<BTreeMap<String, String>, String> {
+    let err = |e: String| format!("{}: {e}", path.display());
+    let mut file = std::fs::File::open(path).map_err(|e| err(e.to_string()))?;
+    let mut len = [0u8; 8];
+    file.read_exact(&mut len).map_err(|_| err("shorter than a safetensors header".into()))?;
+    let len = u64::from_le_bytes(len);
+    let size = file.metadata().map(|m| m.len()).unwrap_or(0);
+    if len > size.saturating_sub(8) || len > 100_000_000 {
+        return Err(err(format!("header length {len} beyond the file: not a safetensors file")));
+    }
+    let mut header = vec![0u8; len as usize];
+    file.read_exact(&mut header).map_err(|e| err(e.to_string()))?;
+    let header: serde_json::Value =
+        serde_json::from_slice(&header).map_err(|e| err(format!("header: {e}")))?;
+    Ok(header
+        .get("__metadata__")
+        .and_then(|m| m.as_object())
+        .map(|m| {
+            m.iter().filter_map(|(k, v)| v.as_str().map(|v| (k.clone(), v.to_string()))).collect()
+        })
+        .unwrap_or_default())
+}
+
+/// Reads a model file written by [`save_safetensors_as`] (f32 or f16; computed in f32) into
+/// a fresh network of the variant its metadata names; returns the variant, the network and
+/// the metadata.
+///
+/// # Errors
+/// Not a safetensors file, no or an unknown `mdrlat_variant`, or tensors that do not fit it.
+pub fn load_safetensors(
+    path: &Path,
+    device: &Device,
+) -> Result<(Variant, QNet, BTreeMap<String, String>), String> {
+    let meta = safetensors_metadata(path)?;
+    let variant: Variant = meta
+        .get("mdrlat_variant")
+        .ok_or_else(|| {
+            format!("{}: no mdrlat_variant in its metadata: not an mdrlat model", path.display())
+        })?
+        .parse()
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut net = QNetConfig::new(variant).init(device);
+    let mut store = SafetensorsStore::from_file(path)
+        .with_from_adapter(PyTorchToBurnAdapter.chain(FloatCastAdapter::to(DType::F32)));
+    let r = net.load_from(&mut store).map_err(|e| format!("{}: {e}", path.display()))?;
+    if !r.errors.is_empty() || !r.missing.is_empty() || !r.unused.is_empty() {
+        return Err(format!(
+            "{}: does not fit a {variant} network ({} errors, {} missing, {} unexpected tensors)",
+            path.display(),
+            r.errors.len(),
+            r.missing.len(),
+            r.unused.len()
+        ));
+    }
+    Ok((variant, net, meta))
+}
+
+/// How far two networks' Q-values lie apart on the same observations (a model stored in f16
+/// against its f32 original).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct QDifference {
+    /// Observations compared.
+    pub observations: usize,
+    /// Largest |ΔQ| over every action of every observation.
+    pub max_abs: f64,
+    /// Mean |ΔQ|.
+    pub mean_abs: f64,
+    /// Largest |Q| of the reference (the scale of the differences).
+    pub max_q: f64,
+    /// Observations where both choose the same greedy action.
+    pub same_action: usize,
+}
+
+/// Compares the Q-values of `a` (the reference) and `b` on `observations`, in forwards of 64.
+///
+/// # Errors
+/// A network could not decide.
+pub fn compare_q(
+    a: &crate::GreedyPolicy,
+    b: &crate::GreedyPolicy,
+    observations: &[mdrlat_core::Observation],
+) -> Result<QDifference, mdrlat_core::PolicyError> {
+    let n = mdrlat_core::Action::COUNT;
+    let mut d = QDifference {
+        observations: observations.len(),
+        max_abs: 0.0,
+        mean_abs: 0.0,
+        max_q: 0.0,
+        same_action: 0,
+    };
+    let mut sum = 0.0;
+    let (mut ia, mut ib) = (crate::Inputs::default(), crate::Inputs::default());
+    for chunk in observations.chunks(64) {
+        let refs: Vec<&mdrlat_core::Observation> = chunk.iter().collect();
+        crate::observation_inputs(&refs, a.variant(), &mut ia);
+        crate::observation_inputs(&refs, b.variant(), &mut ib);
+        let (qa, qb) = (a.q_values(&ia)?, b.q_values(&ib)?);
+        let (mut ga, mut gb) = (Vec::new(), Vec::new());
+        mdrlat_core::greedy_actions(&qa, chunk.len(), &mut ga)?;
+        mdrlat_core::greedy_actions(&qb, chunk.len(), &mut gb)?;
+        d.same_action += ga.iter().zip(&gb).filter(|(x, y)| x == y).count();
+        for (x, y) in qa.iter().zip(&qb).take(chunk.len() * n) {
+            let e = f64::from((x - y).abs());
+            d.max_abs = d.max_abs.max(e);
+            d.max_q = d.max_q.max(f64::from(x.abs()));
+            sum += e;
+        }
+    }
+    d.mean_abs = sum / (observations.len() * n).max(1) as f64;
+    Ok(d)
 }
 
 /// A JSON value with every object's keys in sorted order.

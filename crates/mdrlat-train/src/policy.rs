@@ -53,6 +53,16 @@ fn checkpoint_dir(path: &Path) -> Result<PathBuf, String> {
         })
 }
 
+/// The model file `path` names when it is not a checkpoint: a `.safetensors` file, or a
+/// folder holding `model.safetensors` and no checkpoint (a shipped model, `models/…`).
+fn model_file(path: &Path) -> Option<PathBuf> {
+    if path.is_file() && path.extension().is_some_and(|e| e == "safetensors") {
+        return Some(path.to_path_buf());
+    }
+    let model = path.join("model.safetensors");
+    (path.is_dir() && checkpoint_dir(path).is_err() && model.is_file()).then_some(model)
+}
+
 fn pool(threads: usize) -> Result<rayon::ThreadPool, String> {
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads.max(1))
@@ -92,12 +102,25 @@ pub fn observation_inputs(batch: &[&Observation], variant: Variant, inputs: &mut
 
 impl GreedyPolicy {
     /// The online network of a run's checkpoint (`path`: a run directory or a checkpoint
-    /// folder), computing on `threads` CPU threads.
+    /// folder), or a model file (`path`: a `.safetensors` file written by
+    /// [`crate::export::save_safetensors_as`], f32 or f16, or a folder holding
+    /// `model.safetensors` and no checkpoint), computing on `threads` CPU threads.
     ///
     /// # Errors
-    /// No checkpoint, an unreadable or corrupt `meta.json`, another format, or weights that
+    /// No checkpoint or model, an unreadable or corrupt `meta.json`, another format, or weights that
     /// do not fit the variant it names.
     pub fn load(path: &Path, device: &Device, threads: usize) -> Result<Self, String> {
+        if let Some(model) = model_file(path) {
+            let (variant, net, meta) = crate::export::load_safetensors(&model, device)?;
+            let step = meta.get("mdrlat_step").map_or(String::new(), |s| format!(" (step {s})"));
+            return Self::from_net(
+                variant,
+                net,
+                device,
+                threads,
+                format!("{}{step}", model.display()),
+            );
+        }
         let dir = checkpoint_dir(path)?;
         let meta = read_meta(&dir).map_err(|e| e.to_string())?;
         let mut net = QNetConfig::new(meta.variant).init(device);
@@ -158,6 +181,11 @@ impl GreedyPolicy {
     pub fn with_forward_batch(mut self, rows: Option<usize>) -> Self {
         self.forward_batch = rows.map(|r| r.max(1));
         self
+    }
+
+    /// The network (for exporting it).
+    pub fn net(&self) -> &QNet {
+        &self.net
     }
 
     /// The variant.

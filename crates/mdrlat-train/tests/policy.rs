@@ -81,3 +81,45 @@ fn missing_and_corrupt_checkpoints_are_errors_naming_the_path() {
     assert!(e.contains("meta.json"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_model_stored_in_f16_loads_back_and_decides_alike() {
+    use mdrlat_train::export::{Precision, compare_q, load_safetensors, save_safetensors_as};
+    let dir = std::env::temp_dir().join(format!("mdrlat-f16-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let mut rng = Rng::seed_from_u64(5);
+    let observations: Vec<Observation> = (0..70).map(|_| observation(&mut rng)).collect();
+    for variant in [Variant::LaserOnly, Variant::MultiAt] {
+        let device = Device::flex();
+        let original = GreedyPolicy::untrained(variant, 11, &device, 1).expect("policy");
+        let (f32_path, f16_path) = (dir.join("f32.safetensors"), dir.join("model.safetensors"));
+        let step = [("mdrlat_step", "1234".to_string())];
+        save_safetensors_as(original.net(), variant, &f32_path, Precision::F32, &step)
+            .expect("f32");
+        save_safetensors_as(original.net(), variant, &f16_path, Precision::F16, &step)
+            .expect("f16");
+        let (s32, s16) = (
+            std::fs::metadata(&f32_path).expect("f32").len(),
+            std::fs::metadata(&f16_path).expect("f16").len(),
+        );
+        assert!(s16 * 2 < s32 + 4096, "f16 halves the file: {s16} vs {s32}");
+        // f32 round trip: the same Q-values exactly.
+        let same = GreedyPolicy::load(&f32_path, &device, 1).expect("load f32");
+        let d = compare_q(&original, &same, &observations).expect("compare");
+        assert_eq!((d.max_abs, d.same_action), (0.0, observations.len()), "{d:?}");
+        // f16 (loaded through the folder, as `models/…`): close, computed in f32.
+        let stored = GreedyPolicy::load(&dir, &device, 1).expect("load the model folder");
+        assert!(stored.source().contains("(step 1234)"), "{}", stored.source());
+        assert_eq!(stored.variant(), variant);
+        let d = compare_q(&original, &stored, &observations).expect("compare");
+        assert!(d.max_abs > 0.0 && d.max_abs < 1e-2 * d.max_q.max(1.0), "{d:?}");
+        let (v, _, meta) = load_safetensors(&f16_path, &device).expect("load");
+        assert_eq!((v, meta.get("mdrlat_step").map(String::as_str)), (variant, Some("1234")));
+    }
+    // Not a model: errors naming the file.
+    let junk = dir.join("junk.safetensors");
+    std::fs::write(&junk, b"not a safetensors file").expect("junk");
+    let e = GreedyPolicy::load(&junk, &Device::flex(), 1).expect_err("junk");
+    assert!(e.contains("junk.safetensors"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

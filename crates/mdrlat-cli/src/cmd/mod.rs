@@ -5,6 +5,7 @@ pub mod bench_ros;
 pub mod bench_train;
 pub mod demo;
 pub mod eval;
+pub mod export;
 pub mod observe;
 pub mod plot;
 pub mod render;

@@ -208,8 +208,14 @@ pub fn run(a: &Args) -> Result<()> {
     )?;
     pb.finish_and_clear();
     let weights = dir.join("model.safetensors");
-    mdrlat_train::export::save_safetensors(&learner.policy_net(), config.train.variant, &weights)
-        .map_err(anyhow::Error::msg)?;
+    mdrlat_train::export::save_safetensors_as(
+        &learner.policy_net(),
+        config.train.variant,
+        &weights,
+        mdrlat_train::export::Precision::F32,
+        &[("mdrlat_step", report.steps.to_string())],
+    )
+    .map_err(anyhow::Error::msg)?;
     let last = report.evaluations.last().map(|e| format!("{:.2} ± {:.2}", e.mean(), e.std()));
     out!(
         "{} in '{}': step {} of {}, {} updates, {} episodes, {:.0} s this session; last eval {}",

@@ -1,0 +1,185 @@
+//! `mdrlat export`: a trained run's network as a model folder to ship (`models/…`):
+//! `model.safetensors` (f16 by default: half the bytes) and a README with where it came
+//! from, how far its Q-values lie from the f32 original, and its success table. `mdrlat
+//! eval --checkpoint DIR` and `mdrlat ros --checkpoint DIR` read the folder as they read a
+//! run.
+
+use super::train::DeviceKind;
+use super::{ensure_dir, load_world};
+use anyhow::{Context, Result, bail};
+use mdrlat_core::{Observation, Policy};
+use mdrlat_sim::{Env, SimConfig};
+use mdrlat_train::GreedyPolicy;
+use mdrlat_train::export::{Precision, QDifference, compare_q, save_safetensors_as};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `mdrlat export`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// A run directory of `mdrlat train` (or its checkpoint folder).
+    #[arg(long, value_name = "RUN_DIR")]
+    checkpoint: PathBuf,
+    /// The model folder to write (model.safetensors, README.md).
+    #[arg(long)]
+    out: PathBuf,
+    /// Store the weights in f32 instead of f16.
+    #[arg(long)]
+    f32: bool,
+    /// An evaluation of this run (`mdrlat eval --out`): its summary.md and summary.csv are
+    /// copied beside the model.
+    #[arg(long, value_name = "EVAL_DIR")]
+    eval: Option<PathBuf>,
+    /// Observations the Q-values of the stored model are compared on (driven by the model
+    /// itself in the test worlds office, furnished and crowd).
+    #[arg(long, default_value_t = 600)]
+    samples: usize,
+    /// Seed of the comparison's episodes.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Replace an earlier export in --out.
+    #[arg(long)]
+    overwrite: bool,
+}
+
+/// Observations the policy meets when it drives in the test worlds (a new episode after
+/// each collision or 300 steps), `n` in all.
+fn observations(policy: &mut GreedyPolicy, n: usize, seed: u64) -> Result<Vec<Observation>> {
+    let worlds = ["office", "furnished", "crowd"];
+    let per = n.div_ceil(worlds.len());
+    let mut out = Vec::with_capacity(n);
+    for (w, name) in worlds.iter().enumerate() {
+        let mut env = Env::from_world(load_world(name)?, SimConfig::default())?;
+        let mut episode = 0u64;
+        let mut obs = env.reset(Some(seed + 1000 * w as u64))?.clone();
+        let mut steps = 0;
+        let mut actions = Vec::new();
+        for _ in 0..per {
+            out.push(obs.clone());
+            policy.act(&[&obs], &[0], &mut actions).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let step = env.step(actions[0])?;
+            steps += 1;
+            if step.terminated || step.truncated || steps >= 300 {
+                episode += 1;
+                steps = 0;
+                obs = env.reset(Some(seed + 1000 * w as u64 + episode))?.clone();
+            } else {
+                obs = step.observation.clone();
+            }
+        }
+    }
+    out.truncate(n);
+    Ok(out)
+}
+
+fn readme(
+    out: &Path,
+    policy: &GreedyPolicy,
+    precision: Precision,
+    bytes: u64,
+    diff: &QDifference,
+    eval: Option<&str>,
+) -> String {
+    let mut s = String::new();
+    let name = out.file_name().map_or("model".into(), |n| n.to_string_lossy().into_owned());
+    let _ = writeln!(s, "# {name}: a trained `{}` network\n", policy.variant());
+    let _ = writeln!(
+        s,
+        "- Weights: `model.safetensors`, {:?}, {:.1} MB, PyTorch layout (see the main README, *Weights in PyTorch*).",
+        precision,
+        bytes as f64 / 1e6
+    );
+    let _ = writeln!(s, "- Exported from: `{}`.", policy.source());
+    let _ = writeln!(
+        s,
+        "- Stored against the f32 original on {} observations the model meets driving in office, furnished and crowd: \
+         max |ΔQ| {:.2e}, mean |ΔQ| {:.2e} (largest |Q| {:.2}); the same greedy action in {} of {}.",
+        diff.observations,
+        diff.max_abs,
+        diff.mean_abs,
+        diff.max_q,
+        diff.same_action,
+        diff.observations
+    );
+    let _ = writeln!(
+        s,
+        "\nUse it without training:\n\n```sh\nmdrlat eval --checkpoint {0} --out eval/{name}\nmdrlat ros-sim --world office &   # a simulated robot over ROS\nmdrlat ros --checkpoint {0}      # drives it\n```\n",
+        out.display()
+    );
+    if let Some(table) = eval {
+        let _ = writeln!(
+            s,
+            "## Its success table (`summary.md`)\n\n{}",
+            table.trim_end().replacen("# ", "### ", 1)
+        );
+    }
+    s
+}
+
+/// Runs `mdrlat export`.
+pub fn run(a: &Args) -> Result<()> {
+    let model = a.out.join("model.safetensors");
+    if model.exists() && !a.overwrite {
+        bail!(
+            "{} already holds a model: choose another --out, or pass --overwrite",
+            a.out.display()
+        );
+    }
+    if a.samples == 0 || a.samples > 100_000 {
+        bail!("--samples {}: must be 1 to 100000", a.samples);
+    }
+    let device = DeviceKind::Cpu.device();
+    let mut original = GreedyPolicy::load(&a.checkpoint, &device, 1)
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("--checkpoint {}", a.checkpoint.display()))?;
+    let eval_table = match &a.eval {
+        Some(dir) => {
+            let md = std::fs::read_to_string(dir.join("summary.md"))
+                .with_context(|| format!("--eval {}: no summary.md", dir.display()))?;
+            Some((md, dir.join("summary.csv")))
+        }
+        None => None,
+    };
+    ensure_dir(&a.out)?;
+    let precision = if a.f32 { Precision::F32 } else { Precision::F16 };
+    let step =
+        original.source().rsplit_once("(step ").map(|(_, s)| s.trim_end_matches(')').to_string());
+    let mut extra = vec![("mdrlat_source", a.checkpoint.display().to_string())];
+    if let Some(step) = step {
+        extra.push(("mdrlat_step", step));
+    }
+    save_safetensors_as(original.net(), original.variant(), &model, precision, &extra)
+        .map_err(anyhow::Error::msg)?;
+    let stored = GreedyPolicy::load(&model, &device, 1).map_err(anyhow::Error::msg)?;
+    let obs = observations(&mut original, a.samples, a.seed)?;
+    let diff = compare_q(&original, &stored, &obs).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let bytes = std::fs::metadata(&model).map(|m| m.len()).unwrap_or(0);
+    if let Some((md, csv)) = &eval_table {
+        std::fs::write(a.out.join("summary.md"), md).context("writing summary.md")?;
+        if csv.exists() {
+            std::fs::copy(csv, a.out.join("summary.csv")).context("copying summary.csv")?;
+        }
+    }
+    let text = readme(
+        &a.out,
+        &original,
+        precision,
+        bytes,
+        &diff,
+        eval_table.as_ref().map(|t| t.0.as_str()),
+    );
+    std::fs::write(a.out.join("README.md"), text).context("writing README.md")?;
+    out!(
+        "{}: {:?}, {:.1} MB; vs f32 on {} observations: max |dQ| {:.2e}, mean |dQ| {:.2e} (max |Q| {:.2}), same action {}/{}",
+        model.display(),
+        precision,
+        bytes as f64 / 1e6,
+        diff.observations,
+        diff.max_abs,
+        diff.mean_abs,
+        diff.max_q,
+        diff.same_action,
+        diff.observations
+    );
+    Ok(())
+}
