@@ -133,6 +133,8 @@ fn a_sweep_killed_and_restarted_writes_the_same_bytes() {
         "table2.csv",
         "train/multi-at-s3/model.safetensors",
         "train/laser-only-s3/model.safetensors",
+        "train/multi-at-s3/metrics.csv",
+        "train/multi-at-s3/eval.csv",
         "eval/multi-at-s3/episodes.csv",
         "eval/wander/summary.csv",
     ] {

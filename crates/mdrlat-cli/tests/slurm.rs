@@ -162,10 +162,15 @@ fn the_smoke_sweep_runs_through_a_slurm_cluster() {
     let o = cluster.command("squeue").args(["-h", "-t", "all"]).output().expect("squeue");
     assert!(o.stdout.is_empty(), "a dry run submits nothing");
 
-    let o = args(&["--wait"]).output().expect("sweep");
+    let o = args(&[]).output().expect("submit");
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&o.stderr));
     assert!(stdout.contains("submitted train: Slurm job"), "{stdout}");
+    // Again while those jobs are queued: nothing is queued twice; --wait follows them.
+    let o = args(&["--wait"]).output().expect("wait");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("still in Slurm from an earlier submission"), "{stdout}");
     let csv = std::fs::read_to_string(out.join("table2.csv")).expect("table2.csv");
     assert_eq!(csv.lines().count(), 1 + 3 * 7, "{csv}");
     assert!(csv.lines().skip(1).all(|l| l.ends_with(',')), "no cell missing: {csv}");

@@ -124,7 +124,14 @@ pub fn lock(plan: &Plan, job: &Job) -> Result<JobLock, SweepError> {
         .write(true)
         .open(&path)
         .map_err(|e| io(&path, e))?;
-    file.lock().map_err(|e| io(&path, e))?;
+    file.lock().map_err(|e| SweepError::Io {
+        what: format!(
+            "cannot lock {} (a sweep's folder needs a file system with file locks: local, NFSv4, \
+             or Lustre mounted with -o flock)",
+            path.display()
+        ),
+        source: e,
+    })?;
     Ok(JobLock(file))
 }
 
@@ -151,6 +158,15 @@ mod tests {
         std::fs::create_dir_all(run.join("checkpoint")).expect("dir");
         std::fs::write(run.join("run.toml"), "").expect("file");
         std::fs::write(run.join("checkpoint").join("x"), "").expect("file");
+        assert_eq!(commands(&plan, &job, 1).expect("no meta.json")[0][1], "--out");
+        std::fs::create_dir_all(run.join("checkpoint.old")).expect("dir");
+        std::fs::write(run.join("run.toml"), "").expect("file");
+        // Killed while swapping in a new checkpoint: the old one is resumed, not deleted.
+        std::fs::write(run.join("checkpoint.old").join("meta.json"), "{}").expect("file");
+        assert_eq!(commands(&plan, &job, 1).expect("resume")[0][1], "--resume");
+        std::fs::remove_dir_all(run.join("checkpoint.old")).expect("rm");
+        std::fs::create_dir_all(run.join("checkpoint")).expect("dir");
+        std::fs::write(run.join("checkpoint").join("meta.json"), "{}").expect("file");
         assert_eq!(commands(&plan, &job, 1).expect("resume")[0][1], "--resume");
         let eval = plan.job("eval/mdrlat-s0").expect("eval");
         let argv = commands(&plan, eval, 3).expect("eval");

@@ -65,6 +65,14 @@ pub enum SweepError {
         /// The sweep's folder.
         dir: PathBuf,
     },
+    /// A job started before a job it needs finished.
+    #[error("{job} needs {need}, which is not finished")]
+    NotReady {
+        /// The job.
+        job: String,
+        /// What it needs.
+        need: String,
+    },
     /// A file could not be read or written.
     #[error("{what}: {source}")]
     Io {

@@ -18,6 +18,8 @@ pub enum Event {
     Started(String, bool),
     /// A job ended (id, success, seconds).
     Finished(String, bool, f64),
+    /// Every few seconds: the running jobs, with (step, steps) for training runs.
+    Running(Vec<(String, Option<(u64, u64)>)>),
 }
 
 /// How the local executor runs.
@@ -71,8 +73,44 @@ pub fn run(
 ) -> Result<(), SweepError> {
     plan.open()?;
     let threads = opts.threads();
-    let mut attempted: Vec<String> = Vec::new();
     let mut running: Vec<(String, Child, Instant)> = Vec::new();
+    let result = schedule(plan, exe, opts, &mut running, &mut on_event);
+    if result.is_err() {
+        // The executor cannot go on: its jobs must not run on unwatched (each resumes next time).
+        for (_, child, _) in &mut running {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+        return result;
+    }
+    // The tables, whatever happened before: a partial table says what it lacks.
+    let tables = plan.job("tables")?;
+    if plan.state(tables) != JobState::Done {
+        let mut child = spawn(plan, exe, tables, threads, &mut on_event)?;
+        let started = Instant::now();
+        let status = child
+            .wait()
+            .map_err(|e| SweepError::Io { what: "waiting for the tables job".into(), source: e })?;
+        let ok = status.success() && plan.state(tables) == JobState::Done;
+        if !ok && !matches!(plan.state(tables), JobState::Failed(_)) {
+            plan.mark_failed(tables, &format!("{status}; log {}", plan.log_name(tables)))?;
+        }
+        on_event(&Event::Finished(tables.id.clone(), ok, started.elapsed().as_secs_f64()));
+    }
+    outcome(plan)
+}
+
+/// Runs every job but the tables, `opts.jobs` at a time, until none can run.
+fn schedule(
+    plan: &Plan,
+    exe: &Path,
+    opts: &LocalOptions,
+    running: &mut Vec<(String, Child, Instant)>,
+    on_event: &mut impl FnMut(&Event),
+) -> Result<(), SweepError> {
+    let threads = opts.threads();
+    let mut attempted: Vec<String> = Vec::new();
+    let mut last_report = Instant::now();
     for job in &plan.jobs {
         if plan.state(job) == JobState::Done {
             on_event(&Event::Skipped(job.id.clone()));
@@ -83,13 +121,13 @@ pub fn run(
             let next = plan.jobs.iter().find(|j| {
                 !attempted.contains(&j.id)
                     && plan.state(j) != JobState::Done
-                    && ready(plan, j, &running)
+                    && ready(plan, j, running)
             });
             let Some(job) = next else { break };
             attempted.push(job.id.clone());
             running.push((
                 job.id.clone(),
-                spawn(plan, exe, job, threads, &mut on_event)?,
+                spawn(plan, exe, job, threads, on_event)?,
                 Instant::now(),
             ));
         }
@@ -97,6 +135,14 @@ pub fn run(
             break;
         }
         std::thread::sleep(Duration::from_millis(100));
+        if last_report.elapsed() >= Duration::from_secs(2) {
+            last_report = Instant::now();
+            let now = running
+                .iter()
+                .map(|(id, _, _)| (id.clone(), plan.job(id).ok().and_then(|j| plan.progress(j))))
+                .collect();
+            on_event(&Event::Running(now));
+        }
         let mut i = 0;
         while i < running.len() {
             let status = running[i].1.try_wait().map_err(|e| SweepError::Io {
@@ -109,10 +155,7 @@ pub fn run(
                     let job = plan.job(&id)?;
                     let ok = status.success() && plan.state(job) == JobState::Done;
                     if !ok && !matches!(plan.state(job), JobState::Failed(_)) {
-                        plan.mark_failed(
-                            job,
-                            &format!("{status}; log {}", plan.log_path(job).display()),
-                        )?;
+                        plan.mark_failed(job, &format!("{status}; log {}", plan.log_name(job)))?;
                     }
                     on_event(&Event::Finished(id, ok, started.elapsed().as_secs_f64()));
                 }
@@ -120,24 +163,7 @@ pub fn run(
             }
         }
     }
-    // The tables, whatever happened before: a partial table says what it lacks.
-    let tables = plan.job("tables")?;
-    if plan.state(tables) != JobState::Done {
-        let mut child = spawn(plan, exe, tables, threads, &mut on_event)?;
-        let started = Instant::now();
-        let status = child
-            .wait()
-            .map_err(|e| SweepError::Io { what: "waiting for the tables job".into(), source: e })?;
-        let ok = status.success() && plan.state(tables) == JobState::Done;
-        if !ok && !matches!(plan.state(tables), JobState::Failed(_)) {
-            plan.mark_failed(
-                tables,
-                &format!("{status}; log {}", plan.log_path(tables).display()),
-            )?;
-        }
-        on_event(&Event::Finished(tables.id.clone(), ok, started.elapsed().as_secs_f64()));
-    }
-    outcome(plan)
+    Ok(())
 }
 
 fn spawn(
@@ -177,18 +203,10 @@ pub fn outcome(plan: &Plan) -> Result<(), SweepError> {
         .filter_map(|j| match plan.state(j) {
             JobState::Done => None,
             JobState::Failed(why) => Some(format!("{} failed ({why})", j.id)),
-            _ => {
-                let log = plan.log_path(j);
-                let blocked = j
-                    .needs
-                    .iter()
-                    .filter_map(|n| plan.job(n).ok())
-                    .find(|n| plan.state(n) != JobState::Done);
-                Some(match blocked {
-                    Some(n) => format!("{} not run ({} did not finish)", j.id, n.id),
-                    None => format!("{} did not finish (log {})", j.id, log.display()),
-                })
-            }
+            _ => Some(match plan.blocked_by(j) {
+                Some(n) => format!("{} not run ({} did not finish)", j.id, n.id),
+                None => format!("{} did not finish (log {})", j.id, plan.log_path(j).display()),
+            }),
         })
         .collect();
     if unfinished.is_empty() { Ok(()) } else { Err(SweepError::Failed(unfinished)) }

@@ -135,7 +135,18 @@ impl Plan {
 
     /// A job's log file (stdout and stderr of its process).
     pub fn log_path(&self, job: &Job) -> PathBuf {
-        self.dir.join("logs").join(format!("{}.log", file_id(&job.id)))
+        self.dir.join(self.log_name(job))
+    }
+
+    /// A job's log relative to the sweep's folder (`logs/train-mdrlat-s0.log`): what results
+    /// files name, so that they do not depend on where the folder is.
+    pub fn log_name(&self, job: &Job) -> String {
+        format!("logs/{}.log", file_id(&job.id))
+    }
+
+    /// The first job `job` needs that is not finished.
+    pub fn blocked_by(&self, job: &Job) -> Option<&Job> {
+        job.needs.iter().filter_map(|n| self.job(n).ok()).find(|n| self.state(n) != JobState::Done)
     }
 
     fn marker(&self, job: &Job, ext: &str) -> PathBuf {
@@ -162,6 +173,38 @@ impl Plan {
             _ if self.job_dir(job).exists() => JobState::Partial,
             _ => JobState::Pending,
         }
+    }
+
+    /// Refuses to run a job before what it needs is finished (an evaluation of a training
+    /// run cut off mid-way would otherwise evaluate an unfinished model). The tables need
+    /// nothing finished: they say what is missing.
+    pub fn check_needs(&self, job: &Job) -> Result<(), SweepError> {
+        if job.kind == JobKind::Tables {
+            return Ok(());
+        }
+        for n in &job.needs {
+            let need = self.job(n)?;
+            if self.state(need) != JobState::Done {
+                return Err(SweepError::NotReady { job: job.id.clone(), need: n.clone() });
+            }
+        }
+        Ok(())
+    }
+
+    /// How far a running training job is: (its last logged step, the sweep's steps), read
+    /// from the tail of its `metrics.csv`; `None` for other jobs or before the first row.
+    pub fn progress(&self, job: &Job) -> Option<(u64, u64)> {
+        use std::io::{Read, Seek, SeekFrom};
+        if !matches!(job.kind, JobKind::Train { .. }) {
+            return None;
+        }
+        let mut f = std::fs::File::open(self.job_dir(job).join("metrics.csv")).ok()?;
+        let len = f.metadata().ok()?.len();
+        f.seek(SeekFrom::Start(len.saturating_sub(512))).ok()?;
+        let mut tail = String::new();
+        f.read_to_string(&mut tail).ok()?;
+        let step = tail.lines().rev().find_map(|l| l.split(',').next()?.parse::<u64>().ok())?;
+        Some((step, self.sweep.steps))
     }
 
     /// Records that a job finished (its outputs are complete).
@@ -221,11 +264,13 @@ impl Plan {
                 {
                     return Err(SweepError::NotASweep(self.dir.clone()));
                 }
+                // sweep.toml first: a folder killed right after is still this sweep's.
+                write_atomic(&path, text.as_bytes())?;
                 for sub in ["state", "logs"] {
                     let d = self.dir.join(sub);
                     std::fs::create_dir_all(&d).map_err(|e| io(&d, e))?;
                 }
-                write_atomic(&path, text.as_bytes())
+                Ok(())
             }
             Err(e) => Err(io(&path, e)),
         }
@@ -246,10 +291,14 @@ pub fn file_id(id: &str) -> String {
     id.replace('/', "-")
 }
 
-/// Whether a run directory holds a checkpoint to resume from.
+/// Whether a run directory holds a checkpoint to resume from: `checkpoint/meta.json`, or
+/// `checkpoint.old/meta.json` when the run was killed while swapping in a new checkpoint
+/// (training's resume reads that one then, as `mdrlat_train::checkpoint::load` does).
 pub fn has_checkpoint(run_dir: &Path) -> bool {
-    run_dir.join("run.toml").exists()
-        && std::fs::read_dir(run_dir.join("checkpoint")).is_ok_and(|mut d| d.next().is_some())
+    run_dir.join("run.toml").is_file()
+        && ["checkpoint", "checkpoint.old"]
+            .iter()
+            .any(|c| run_dir.join(c).join("meta.json").is_file())
 }
 
 pub(crate) fn io(path: &Path, e: std::io::Error) -> SweepError {
@@ -288,6 +337,9 @@ mod tests {
         assert!(matches!(other.kind, JobKind::EvalModel { figures: 0, .. }));
         let tables = plan.job("tables").expect("tables");
         assert_eq!(tables.needs.len(), 31);
+        let e = plan.check_needs(e).expect_err("the model is not trained");
+        assert_eq!(e.to_string(), "eval/mdrlat-s0 needs train/mdrlat-s0, which is not finished");
+        assert!(plan.check_needs(tables).is_ok(), "the tables say what is missing");
         assert!(plan.job("train/nope").is_err());
     }
 

@@ -1,6 +1,7 @@
 //! The Slurm executor: one array job for the unfinished training runs, one array job for
 //! the evaluations (after the training array succeeded: `--dependency=afterok`), one job for
-//! the tables (after the evaluations). Every job runs `mdrlat reproduce --out DIR --job ID`
+//! the tables (after the evaluations ended, however: `afterany`, so that a failure still
+//! leaves a table saying what is missing). Every job runs `mdrlat reproduce --out DIR --job ID`
 //! with the same binary, by absolute path: the nodes must share the file system that holds
 //! the binary and the sweep's folder.
 
@@ -29,10 +30,14 @@ pub struct SlurmOptions {
 /// One batch script.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Script {
-    /// `train`, `eval` or `tables`.
+    /// `train`, `eval` (evaluations of the models this submission trains, task i after
+    /// training task i), `eval-ready` (evaluations whose models are already trained, and
+    /// the baselines) or `tables`.
     pub name: &'static str,
     /// The jobs it runs (an array's tasks in index order).
     pub jobs: Vec<String>,
+    /// What it waits for: (Slurm dependency type, the earlier script's name).
+    pub after: Vec<(&'static str, &'static str)>,
     /// The script's text.
     pub text: String,
 }
@@ -57,7 +62,7 @@ fn script(
     let _ = writeln!(s, "# mdrlat reproduce: {name} jobs of sweep '{}' in {dir}", plan.sweep.name);
     let _ =
         writeln!(s, "#SBATCH --job-name={}", quote(&format!("mdrlat-{}-{name}", plan.sweep.name)));
-    let array = jobs.len() > 1 || name != "tables";
+    let array = name != "tables";
     if array {
         let _ = writeln!(s, "#SBATCH --array=0-{}", jobs.len() - 1);
         let _ = writeln!(
@@ -98,25 +103,42 @@ fn script(
         quote(&dir),
         quote(&dir)
     );
-    Script { name, jobs: jobs.iter().map(|j| j.id.clone()).collect(), text: s }
+    Script { name, jobs: jobs.iter().map(|j| j.id.clone()).collect(), after: Vec::new(), text: s }
 }
 
-/// The batch scripts for the unfinished jobs (training array, evaluation array, tables).
+/// The batch scripts for the unfinished jobs: the training array; the evaluations of the
+/// models it trains as an array whose task i waits for training task i
+/// (`--dependency=aftercorr`: afterok task by task, so one failed training cancels only its
+/// own evaluation); the other evaluations (models already trained, baselines) at once; the
+/// tables after every evaluation ended, however (`afterany`: a failure still leaves a table
+/// that says what is missing).
 pub fn scripts(plan: &Plan, exe: &Path, opts: &SlurmOptions) -> Vec<Script> {
     let todo = |j: &&Job| plan.state(j) != JobState::Done;
     let train: Vec<&Job> = plan.train_jobs().filter(todo).collect();
-    let eval: Vec<&Job> = plan.eval_jobs().filter(todo).collect();
+    let eval_of = |t: &Job| plan.eval_jobs().find(|e| e.needs.contains(&t.id));
+    let paired: Vec<&Job> = train.iter().filter_map(|t| eval_of(t)).collect();
+    let ready: Vec<&Job> =
+        plan.eval_jobs().filter(todo).filter(|e| !paired.iter().any(|p| p.id == e.id)).collect();
     let mut out = Vec::new();
     if !train.is_empty() {
         out.push(script(plan, exe, "train", &train, opts));
+        let mut eval = script(plan, exe, "eval", &paired, opts);
+        eval.after.push(("aftercorr", "train"));
+        out.push(eval);
     }
-    if !eval.is_empty() {
-        out.push(script(plan, exe, "eval", &eval, opts));
+    if !ready.is_empty() {
+        out.push(script(plan, exe, "eval-ready", &ready, opts));
     }
     if let Ok(t) = plan.job("tables")
         && (plan.state(t) != JobState::Done || !out.is_empty())
     {
-        out.push(script(plan, exe, "tables", &[t], opts));
+        let mut tables = script(plan, exe, "tables", &[t], opts);
+        for s in &out {
+            if s.name != "train" {
+                tables.after.push(("afterany", s.name));
+            }
+        }
+        out.push(tables);
     }
     out
 }
@@ -126,6 +148,8 @@ pub fn scripts(plan: &Plan, exe: &Path, opts: &SlurmOptions) -> Vec<Script> {
 pub struct Submitted {
     /// (script name, Slurm job id) in submission order.
     pub jobs: Vec<(&'static str, String)>,
+    /// These jobs were submitted earlier and are still in Slurm (nothing new was queued).
+    pub resumed: bool,
 }
 
 fn run_tool(program: &str, args: &[String]) -> Result<String, SweepError> {
@@ -148,9 +172,35 @@ fn run_tool(program: &str, args: &[String]) -> Result<String, SweepError> {
     Ok(String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
-/// Writes the scripts to `DIR/slurm/` and submits them, each after the one before it.
+/// The jobs of an earlier submission that Slurm still lists as waiting or running.
+fn still_queued(plan: &Plan) -> Result<Option<Submitted>, SweepError> {
+    let Ok(text) = std::fs::read_to_string(plan.dir.join("slurm").join("submitted.toml")) else {
+        return Ok(None);
+    };
+    let names = ["train", "eval", "eval-ready", "tables"];
+    let jobs: Vec<(&'static str, String)> = text
+        .lines()
+        .filter_map(|l| {
+            let (k, v) = l.split_once(" = ")?;
+            let name = names.iter().find(|n| **n == k.trim())?;
+            Some((*name, v.trim().trim_matches('"').to_string()))
+        })
+        .collect();
+    let ids: Vec<String> = jobs.iter().map(|j| j.1.clone()).collect();
+    if ids.is_empty() || active(&ids)? == 0 {
+        return Ok(None);
+    }
+    Ok(Some(Submitted { jobs, resumed: true }))
+}
+
+/// Writes the scripts to `DIR/slurm/` and submits them, each after what it waits for. If
+/// an earlier submission of this sweep is still in Slurm, submits nothing and returns that
+/// one (`resumed`): the same jobs are never queued twice.
 pub fn submit(plan: &Plan, exe: &Path, opts: &SlurmOptions) -> Result<Submitted, SweepError> {
     plan.open()?;
+    if let Some(earlier) = still_queued(plan)? {
+        return Ok(earlier);
+    }
     let dir = plan.dir.join("slurm");
     std::fs::create_dir_all(&dir).map_err(|e| io(&dir, e))?;
     let mut jobs: Vec<(&'static str, String)> = Vec::new();
@@ -158,8 +208,15 @@ pub fn submit(plan: &Plan, exe: &Path, opts: &SlurmOptions) -> Result<Submitted,
         let path = dir.join(format!("{}.sbatch", s.name));
         write_atomic(&path, s.text.as_bytes())?;
         let mut args = vec!["--parsable".to_string()];
-        if let Some((_, after)) = jobs.last() {
-            args.push(format!("--dependency=afterok:{after}"));
+        let after: Vec<String> = s
+            .after
+            .iter()
+            .filter_map(|(kind, name)| {
+                jobs.iter().find(|j| j.0 == *name).map(|j| format!("{kind}:{}", j.1))
+            })
+            .collect();
+        if !after.is_empty() {
+            args.push(format!("--dependency={}", after.join(",")));
             args.push("--kill-on-invalid-dep=yes".into());
         }
         args.push(path.display().to_string());
@@ -176,10 +233,11 @@ pub fn submit(plan: &Plan, exe: &Path, opts: &SlurmOptions) -> Result<Submitted,
     }
     let record: String = jobs.iter().map(|(n, id)| format!("{n} = \"{id}\"\n")).collect();
     write_atomic(&dir.join("submitted.toml"), record.as_bytes())?;
-    Ok(Submitted { jobs })
+    Ok(Submitted { jobs, resumed: false })
 }
 
-/// Jobs of `ids` that Slurm still lists as waiting or running.
+/// Jobs of `ids` that Slurm still lists in a state that is not final. A failing `squeue`
+/// (a busy controller) is asked again a few times before it is an error.
 fn active(ids: &[String]) -> Result<usize, SweepError> {
     let args = vec![
         "-h".to_string(),
@@ -190,15 +248,34 @@ fn active(ids: &[String]) -> Result<usize, SweepError> {
         "-o".into(),
         "%T".into(),
     ];
-    let out = match run_tool("squeue", &args) {
-        Ok(o) => o,
-        // Jobs Slurm has forgotten are finished.
-        Err(SweepError::Slurm(e)) if e.contains("Invalid job id") => return Ok(0),
-        Err(e) => return Err(e),
+    let mut tries = 0;
+    let out = loop {
+        match run_tool("squeue", &args) {
+            Ok(o) => break o,
+            // Jobs Slurm has forgotten are finished.
+            Err(SweepError::Slurm(e)) if e.contains("Invalid job id") => return Ok(0),
+            Err(SweepError::Slurm(e)) if tries < 5 && !e.contains("not found on PATH") => {
+                tries += 1;
+                std::thread::sleep(Duration::from_secs(2 * tries));
+                let _ = e;
+            }
+            Err(e) => return Err(e),
+        }
     };
-    let live =
-        ["PENDING", "RUNNING", "CONFIGURING", "COMPLETING", "SUSPENDED", "REQUEUED", "RESIZING"];
-    Ok(out.lines().filter(|l| live.contains(&l.trim())).count())
+    let terminal = [
+        "COMPLETED",
+        "CANCELLED",
+        "FAILED",
+        "TIMEOUT",
+        "NODE_FAIL",
+        "PREEMPTED",
+        "BOOT_FAIL",
+        "DEADLINE",
+        "OUT_OF_MEMORY",
+        "REVOKED",
+        "SPECIAL_EXIT",
+    ];
+    Ok(out.lines().map(str::trim).filter(|l| !l.is_empty() && !terminal.contains(l)).count())
 }
 
 /// Waits until Slurm lists none of the submitted jobs as waiting or running, then reads
@@ -240,7 +317,10 @@ mod tests {
             extra: vec!["--qos=low".into()],
         };
         let s = scripts(&plan, Path::new("/opt/mdrlat/bin/mdrlat"), &opts);
-        assert_eq!(s.iter().map(|s| s.name).collect::<Vec<_>>(), ["train", "eval", "tables"]);
+        let names: Vec<&str> = s.iter().map(|s| s.name).collect();
+        assert_eq!(names, ["train", "eval", "eval-ready", "tables"]);
+        assert_eq!(s[1].after, [("aftercorr", "train")]);
+        assert_eq!(s[3].after, [("afterany", "eval"), ("afterany", "eval-ready")]);
         let train = &s[0].text;
         assert!(train.contains("#SBATCH --array=0-5\n"), "{train}");
         assert!(
@@ -260,12 +340,15 @@ mod tests {
             "{train}"
         );
         assert!(!s[1].text.contains("--gres"), "evaluations need no GPU: {}", s[1].text);
-        assert!(s[1].text.contains("--array=0-6"), "{}", s[1].text);
+        let eval = &s[1].text;
         assert!(
-            !s[2].text.contains("--array") && s[2].text.contains("JOBS=(tables)"),
-            "{}",
-            s[2].text
+            eval.contains("--array=0-5") && eval.contains("JOBS=(eval/laser-only-s0 "),
+            "{eval}"
         );
+        let ready = &s[2].text;
+        assert!(ready.contains("--array=0-0") && ready.contains("JOBS=(eval/wander)"), "{ready}");
+        let tables = &s[3].text;
+        assert!(!tables.contains("--array") && tables.contains("JOBS=(tables)"), "{tables}");
         assert_eq!(quote("it's"), "'it'\\''s'");
     }
 }

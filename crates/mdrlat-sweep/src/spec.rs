@@ -97,13 +97,27 @@ impl Sweep {
         Ok(sweep)
     }
 
-    /// Reads a sweep file.
+    /// Reads a sweep file. World files it names by a relative path are taken relative to
+    /// the sweep file and stored absolute, so the sweep resumes from any directory.
     pub fn load(path: &std::path::Path) -> Result<Sweep, SweepError> {
         let text = std::fs::read_to_string(path).map_err(|e| SweepError::Io {
             what: format!("cannot read sweep file {}", path.display()),
             source: e,
         })?;
-        Sweep::parse(&text, &path.display().to_string())
+        let mut sweep = Sweep::parse(&text, &path.display().to_string())?;
+        let base = std::path::absolute(path)
+            .ok()
+            .and_then(|p| p.parent().map(std::path::Path::to_path_buf))
+            .unwrap_or_default();
+        let resolve = |w: &mut String| {
+            let is_file = w.contains('/') || w.ends_with(".toml") || w.ends_with(".yaml");
+            if is_file && std::path::Path::new(w.as_str()).is_relative() {
+                *w = base.join(w.as_str()).display().to_string();
+            }
+        };
+        resolve(&mut sweep.world);
+        sweep.eval.worlds.iter_mut().for_each(resolve);
+        Ok(sweep)
     }
 
     /// The sweep as canonical TOML: what `DIR/sweep.toml` holds and reruns compare against.
@@ -154,6 +168,12 @@ impl Sweep {
                 return Err(format!("set[{i}] '{s}': expected KEY=VALUE, e.g. train.gamma=0.95"));
             };
             let key = key.trim();
+            if key.starts_with("sim.") {
+                return Err(format!(
+                    "set[{i}] '{s}': simulator settings are not swept (every method is trained and \
+                     evaluated in the default simulator, as the paper compares them)"
+                ));
+            }
             if ["train.variant", "train.seed", "train.total_steps"].contains(&key) {
                 return Err(format!(
                     "set[{i}] '{s}': {key} is the sweep's own (variants, seeds, steps)"
@@ -283,6 +303,7 @@ mod tests {
         bad("[\"wander\"]", "[\"wandr\"]", "wandr");
         bad("figure_variant = \"mdrlat\"", "figure_variant = \"mdrlat\"\nbogus = 1", "bogus");
         bad("\"train.learning_starts=100\"", "\"train.seed=3\"", "train.seed");
+        bad("\"train.learning_starts=100\"", "\"sim.laser.noise_std_m=0.1\"", "simulator settings");
         bad("\"train.learning_starts=100\"", "\"train.gamma\"", "KEY=VALUE");
         assert!(
             Sweep::preset("papr")

@@ -124,34 +124,35 @@ pub struct Table2 {
     pub worlds: Vec<String>,
 }
 
+/// Why a job's results are missing, in words that do not depend on where the folder is
+/// (the full reason is in `state/` and the job's log).
 fn why_missing(plan: &Plan, job: &Job) -> String {
     match plan.state(job) {
-        JobState::Failed(why) => format!("{} failed ({why})", job.id),
+        JobState::Failed(_) => format!("{} failed (see {})", job.id, plan.log_name(job)),
         JobState::Partial => format!("{} interrupted (not finished)", job.id),
-        JobState::Pending => {
-            let blocked = job
-                .needs
-                .iter()
-                .filter_map(|n| plan.job(n).ok())
-                .find(|n| plan.state(n) != JobState::Done);
-            match blocked {
-                Some(n) => format!("{} not run ({} not finished)", job.id, n.id),
-                None => format!("{} not run yet", job.id),
-            }
-        }
+        JobState::Pending => match plan.blocked_by(job) {
+            Some(n) => format!("{} not run ({} not finished)", job.id, n.id),
+            None => format!("{} not run yet", job.id),
+        },
         JobState::Done => format!("{} finished without this world in its summary.csv", job.id),
     }
 }
 
-/// Reads a finished evaluation job's `summary.csv`.
-fn read_summary(plan: &Plan, job: &Job) -> Result<Option<Vec<WorldSummary>>, SweepError> {
+/// An evaluation's `summary.csv` rows, or why they cannot be read.
+type Summary = Result<Vec<WorldSummary>, String>;
+
+/// A finished evaluation job's `summary.csv` (`None`: not finished).
+fn read_summary(plan: &Plan, job: &Job) -> Option<Summary> {
     if plan.state(job) != JobState::Done {
-        return Ok(None);
+        return None;
     }
     let path = plan.job_dir(job).join("summary.csv");
-    let text = std::fs::read_to_string(&path)
-        .map_err(|e| SweepError::Io { what: path.display().to_string(), source: e })?;
-    parse_summary_csv(&text, &path.display().to_string()).map(Some).map_err(SweepError::Results)
+    let name = format!("{}/summary.csv", job.id);
+    Some(
+        std::fs::read_to_string(&path)
+            .map_err(|e| format!("{name}: {e}"))
+            .and_then(|text| parse_summary_csv(&text, &name)),
+    )
 }
 
 impl Table2 {
@@ -161,13 +162,11 @@ impl Table2 {
         let s = &plan.sweep;
         let mut methods: Vec<Method> = s.variants.iter().map(|&v| Method::Variant(v)).collect();
         methods.extend(s.eval.baselines.iter().map(|b| Method::Baseline(b.clone())));
-        let mut summaries: Vec<(&Job, Option<Vec<WorldSummary>>)> = Vec::new();
-        for job in plan.eval_jobs() {
-            summaries.push((job, read_summary(plan, job)?));
-        }
+        let summaries: Vec<(&Job, Option<Summary>)> =
+            plan.eval_jobs().map(|j| (j, read_summary(plan, j))).collect();
         let find = |id: &str| summaries.iter().find(|(j, _)| j.id == id);
         let mut cells = Vec::new();
-        for world in &s.eval.worlds {
+        for (w, world) in s.eval.worlds.iter().enumerate() {
             for method in &methods {
                 let ids: Vec<String> = match method {
                     Method::Variant(v) => {
@@ -185,14 +184,26 @@ impl Table2 {
                 };
                 for id in ids {
                     let Some((job, rows)) = find(&id) else { continue };
-                    let row = rows.as_ref().and_then(|r| r.iter().find(|r| &r.world == world));
+                    // An evaluation writes one row per world in the sweep's order (a world
+                    // file's row is named by the world, not by its path).
+                    let row = match rows {
+                        Some(Ok(r)) if r.len() == s.eval.worlds.len() => Ok(&r[w]),
+                        Some(Ok(r)) => Err(format!(
+                            "{} has {} worlds in its summary.csv, the sweep {}",
+                            job.id,
+                            r.len(),
+                            s.eval.worlds.len()
+                        )),
+                        Some(Err(e)) => Err(format!("{} unreadable: {e}", job.id)),
+                        None => Err(why_missing(plan, job)),
+                    };
                     match row {
-                        Some(r) => {
+                        Ok(r) => {
                             cell.per_run.extend(&r.success_per_run);
                             cell.per_seed.push(r.success_mean);
                             cell.path_m.push(r.path_m_mean);
                         }
-                        None => cell.missing.push(why_missing(plan, job)),
+                        Err(why) => cell.missing.push(why),
                     }
                 }
                 cells.push(cell);
@@ -568,14 +579,14 @@ mod tests {
         let plan = Plan::new(Sweep::preset("smoke").expect("smoke"), &dir);
         plan.open().expect("open");
         let job = plan.job("eval/multi-s0").expect("job").clone();
-        plan.mark_failed(&job, "exit status: 1; log logs/eval-multi-s0.log").expect("mark");
+        plan.mark_failed(&job, "exit status: 1").expect("mark");
         let t = Table2::gather(&plan).expect("gather");
         assert!(!t.complete());
         let csv = t.csv();
         assert_eq!(csv.lines().count(), 1 + 3 * 7, "{csv}");
         assert!(
             csv.contains(
-                "office,multi,0,0,,,,76.8,4.1,,eval/multi-s0 failed (exit status: 1; log logs/"
+                "office,multi,0,0,,,,76.8,4.1,,eval/multi-s0 failed (see logs/eval-multi-s0.log)"
             ),
             "{csv}"
         );

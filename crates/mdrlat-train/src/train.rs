@@ -273,12 +273,14 @@ pub fn train(
     let (mut learner, mut replay, mut run, mut metrics, mut evals_csv) = if resume {
         let (run, learner, replay) = checkpoint::load(dir, config, device)?;
         env.restore(&run.env)?;
-        // A partial-window row at the checkpoint step is written again, complete.
+        // A partial-window row at the checkpoint step is written again, complete — unless
+        // the run is already at its end (killed after its last checkpoint): then nothing
+        // would write it again, and it is kept.
         let metrics = reopen(
             dir.join("metrics.csv"),
             METRICS_HEADER,
             run.step,
-            run.step % LOG_INTERVAL == 0,
+            run.step % LOG_INTERVAL == 0 || run.step >= config.total_steps,
         )?;
         let evals = reopen(dir.join("eval.csv"), EVAL_HEADER, run.step, true)?;
         (learner, replay, run, metrics, evals)

@@ -92,7 +92,8 @@ fn check_sweep(sweep: &Sweep, source: &str) -> Result<()> {
     }
     {
         use clap::ValueEnum;
-        DeviceKind::from_str(&sweep.device, true).map_err(|_| {
+        // Exactly as `mdrlat train --device` reads it.
+        DeviceKind::from_str(&sweep.device, false).map_err(|_| {
             anyhow::anyhow!(
                 "{source}: device '{}' is not available in this build (cpu, or rebuild with --features {})",
                 sweep.device,
@@ -142,8 +143,14 @@ pub fn run(a: &Args) -> Result<()> {
 fn run_local(plan: &Plan, exe: &std::path::Path, jobs: usize) -> Result<()> {
     let opts = LocalOptions { jobs, cores: cores() };
     let total = plan.jobs.len() as u64;
-    let pb = progress::bar(total, "jobs");
+    let pb = progress::jobs_bar(total);
     let mut running: Vec<String> = Vec::new();
+    let show = |(id, p): &(String, Option<(u64, u64)>)| match p {
+        Some((step, steps)) => {
+            format!("{id} {:.1}k/{:.0}k", *step as f64 / 1e3, *steps as f64 / 1e3)
+        }
+        None => id.clone(),
+    };
     out!(
         "sweep '{}' in {}: {} jobs, {} at a time with {} thread(s) each; logs in {}/logs",
         plan.sweep.name,
@@ -167,8 +174,12 @@ fn run_local(plan: &Plan, exe: &std::path::Path, jobs: usize) -> Result<()> {
                 let word = if *ok { "finished" } else { "FAILED  " };
                 pb.suspend(|| out!("{word} {id} ({secs:.0} s)"));
             }
+            Event::Running(now) => {
+                pb.set_message(now.iter().map(show).collect::<Vec<_>>().join(", "));
+                return;
+            }
         }
-        pb.set_message(running.join(" "));
+        pb.set_message(running.join(", "));
     });
     pb.finish_and_clear();
     report_outcome(plan, result)
@@ -215,17 +226,19 @@ fn run_slurm(plan: &Plan, exe: &std::path::Path, a: &Args) -> Result<()> {
         out!("every job of the sweep in {} is finished", plan.dir.display());
         return report_outcome(plan, mdrlat_sweep::local::outcome(plan));
     }
+    let word =
+        if submitted.resumed { "still in Slurm from an earlier submission" } else { "submitted" };
     for (name, id) in &submitted.jobs {
-        out!("submitted {name}: Slurm job {id}");
+        out!("{word} {name}: Slurm job {id}");
     }
     out!("scripts in {0}/slurm, logs in {0}/logs", plan.dir.display());
     if !a.wait {
         out!(
-            "rerun with --wait (or squeue) to follow; rerun the same command to continue after a failure"
+            "rerun with --wait to follow (nothing is queued twice while these are in Slurm); once they ended, rerun to continue after a failure"
         );
         return Ok(());
     }
-    let pb = progress::bar(plan.jobs.len() as u64, "jobs");
+    let pb = progress::jobs_bar(plan.jobs.len() as u64);
     let result = mdrlat_sweep::slurm::wait(plan, &submitted, Duration::from_secs(2), |active| {
         let done = plan.jobs.iter().filter(|j| plan.state(j) == JobState::Done).count();
         pb.set_position(done as u64);
@@ -246,6 +259,7 @@ fn run_job(dir: &std::path::Path, id: &str, threads: usize) -> Result<()> {
         return Ok(());
     }
     let result = (|| -> Result<()> {
+        plan.check_needs(&job)?;
         for argv in mdrlat_sweep::job::commands(&plan, &job, threads)? {
             out!("{id}: mdrlat {}", argv.join(" "));
             crate::run_argv(&argv)?;
@@ -272,7 +286,7 @@ fn run_job(dir: &std::path::Path, id: &str, threads: usize) -> Result<()> {
         Err(e) => {
             let why = format!("{e:#}");
             let line = why.lines().next().unwrap_or("failed");
-            plan.mark_failed(&job, &format!("{line}; log {}", plan.log_path(&job).display()))?;
+            plan.mark_failed(&job, &format!("{line}; log {}", plan.log_name(&job)))?;
             Err(e)
         }
     }
