@@ -70,6 +70,19 @@ fn an_interrupted_run_resumes_exactly() {
     assert_eq!(probe(&a), probe(&b), "same weights");
     assert_eq!(read(&straight, "metrics.csv"), read(&cut, "metrics.csv"));
     assert_eq!(read(&straight, "eval.csv"), read(&cut, "eval.csv"));
+
+    // Killed after its last checkpoint (step 250 of 250) but before anyone knew it was
+    // done: resuming it changes nothing, its last (partial-window) row included.
+    let end = dir("end");
+    train(world(), &sim(), &config(Variant::LaserOnly, 250), &dev, &end, false, |_| {})
+        .expect("run");
+    let before = read(&end, "metrics.csv");
+    assert!(before.lines().last().is_some_and(|l| l.starts_with("250,")), "{before}");
+    let (report, _) =
+        train(world(), &sim(), &config(Variant::LaserOnly, 250), &dev, &end, true, |_| {})
+            .expect("resume at the end");
+    assert_eq!(report.steps, 250);
+    assert_eq!(read(&end, "metrics.csv"), before);
 }
 
 #[test]
