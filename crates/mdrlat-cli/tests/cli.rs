@@ -2,31 +2,12 @@
 //! one clear line and a non-zero exit (never a panic).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn mdrlat(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mdrlat")).args(args).output().expect("run mdrlat")
-}
+mod common;
+use common::{assert_clean_failure, mdrlat, stderr};
 
 fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("mdrlat-cli-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn assert_clean_failure(o: &Output, needles: &[&str]) {
-    let e = stderr(o);
-    assert!(!o.status.success(), "expected failure, got success; stderr: {e}");
-    assert!(!e.contains("panicked"), "panic instead of an error: {e}");
-    assert!(e.starts_with("error: "), "one clear error line: {e}");
-    for n in needles {
-        assert!(e.contains(n), "stderr lacks '{n}': {e}");
-    }
+    common::tmp("cli", name)
 }
 
 fn npy_f32(path: &Path) -> (String, Vec<f32>) {

@@ -5,34 +5,14 @@
 
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-const EXE: &str = env!("CARGO_BIN_EXE_mdrlat");
-
-fn mdrlat(args: &[&str]) -> Output {
-    Command::new(EXE).args(args).output().expect("run mdrlat")
-}
+mod common;
+use common::{EXE, assert_clean_failure, mdrlat, stderr};
 
 fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("mdrlat-repro-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn assert_clean_failure(o: &Output, needles: &[&str]) {
-    let e = stderr(o);
-    assert!(!o.status.success(), "expected failure, got success; stderr: {e}");
-    assert!(!e.contains("panicked"), "panic instead of an error: {e}");
-    assert!(e.starts_with("error: "), "one clear error line: {e}");
-    for n in needles {
-        assert!(e.contains(n), "stderr lacks '{n}': {e}");
-    }
+    common::tmp("repro", name)
 }
 
 /// Two variants, 240 steps with a checkpoint every 80: small enough for a test, long

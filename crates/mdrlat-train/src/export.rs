@@ -120,16 +120,7 @@ pub fn load_safetensors(
     let mut net = QNetConfig::new(variant).init(device);
     let mut store = SafetensorsStore::from_file(path)
         .with_from_adapter(PyTorchToBurnAdapter.chain(FloatCastAdapter::to(DType::F32)));
-    let r = net.load_from(&mut store).map_err(|e| format!("{}: {e}", path.display()))?;
-    if !r.errors.is_empty() || !r.missing.is_empty() || !r.unused.is_empty() {
-        return Err(format!(
-            "{}: does not fit a {variant} network ({} errors, {} missing, {} unexpected tensors)",
-            path.display(),
-            r.errors.len(),
-            r.missing.len(),
-            r.unused.len()
-        ));
-    }
+    crate::learner::load_all(&mut net, &mut store, path, variant)?;
     Ok((variant, net, meta))
 }
 

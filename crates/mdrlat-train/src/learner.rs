@@ -164,7 +164,18 @@ pub fn read_net(net: &mut QNet, path: &Path, variant: Variant) -> Result<(), Str
         return Err(format!("{}: missing", path.display()));
     }
     let mut store = BurnpackStore::from_file(path).auto_extension(false);
-    let r = net.load_from(&mut store).map_err(|e| format!("{}: {e}", path.display()))?;
+    load_all(net, &mut store, path, variant)
+}
+
+/// Loads every tensor of `store` into `net`; a file that does not fit the variant exactly
+/// (errors, missing or unexpected tensors) is an error naming `path`.
+pub(crate) fn load_all(
+    net: &mut QNet,
+    store: &mut impl mdrlat_nn::burn::store::ModuleStore,
+    path: &Path,
+    variant: Variant,
+) -> Result<(), String> {
+    let r = net.load_from(store).map_err(|e| format!("{}: {e}", path.display()))?;
     if !r.errors.is_empty() || !r.missing.is_empty() || !r.unused.is_empty() {
         return Err(format!(
             "{}: does not fit a {variant} network ({} errors, {} missing, {} unexpected tensors)",
