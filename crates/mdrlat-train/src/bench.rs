@@ -100,6 +100,28 @@ pub fn infer_ms(
     })
 }
 
+/// Median milliseconds of one decision (batch 1) of a fresh `variant` policy on one core
+/// of the CPU backend, with its linear layers' weights in bfloat16 when `bf16`
+/// ([`crate::GreedyPolicy::with_bf16_weights`]), and the samples.
+///
+/// # Errors
+/// The CPU lacks the bfloat16 kernel, or the policy's thread cannot start.
+pub fn decision_ms(
+    variant: Variant,
+    bf16: bool,
+    min_time: Duration,
+) -> Result<(f64, usize), String> {
+    let mut policy = crate::GreedyPolicy::untrained(variant, 0, &Device::flex(), 1)?;
+    if bf16 {
+        policy = policy.with_bf16_weights()?;
+    }
+    let b = random_batch(variant, 1, 2);
+    let inputs = Inputs { size: 1, laser: b.laser, depth: b.depth };
+    Ok(median_ms(min_time, || {
+        let _ = policy.q_values(&inputs);
+    }))
+}
+
 /// Median milliseconds of one batched greedy decision for `observations` random
 /// observations of `variant` (as an evaluation makes them: normalisation, forwards of
 /// `forward_batch` rows side by side on `threads` threads, argmax), and the arithmetic rate

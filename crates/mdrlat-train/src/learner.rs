@@ -128,6 +128,18 @@ pub(crate) fn q_forward(
     device: &Device,
     inputs: &Inputs,
 ) -> Result<Vec<f32>, PolicyError> {
+    q_forward_with(net, None, variant, device, inputs)
+}
+
+/// [`q_forward`], through `host` when given (a host network prepared once, e.g. with
+/// bfloat16 weights) instead of one read from `net`.
+pub(crate) fn q_forward_with(
+    net: &QNet,
+    host: Option<&HostNet>,
+    variant: Variant,
+    device: &Device,
+    inputs: &Inputs,
+) -> Result<Vec<f32>, PolicyError> {
     let b = inputs.size;
     if variant.uses_laser() && inputs.laser.len() != b * FRAME_STACK * LASER_BEAMS {
         return Err(PolicyError::Backend(format!(
@@ -143,6 +155,9 @@ pub(crate) fn q_forward(
     }
     if b == 0 {
         return Ok(Vec::new());
+    }
+    if let Some(host) = host {
+        return Ok(host.q_values(&inputs.host()));
     }
     if let Some(host) = net.host(&QNetConfig::new(variant)) {
         return Ok(host.q_values(&inputs.host()));

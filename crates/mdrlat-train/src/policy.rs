@@ -4,7 +4,7 @@
 //! and the ROS node call.
 
 use crate::checkpoint::read_meta;
-use crate::learner::{Inputs, q_forward, read_net};
+use crate::learner::{Inputs, q_forward_with, read_net};
 use mdrlat_core::{
     Action, FRAME_STACK, Observation, Policy, PolicyError, Sensors, catch_panic, check_batch,
     greedy_actions, normalize_depth, normalize_laser,
@@ -24,6 +24,8 @@ pub struct GreedyPolicy {
     forward_batch: Option<usize>,
     /// One input buffer per forward of a batch.
     inputs: Vec<Inputs>,
+    /// The network prepared once for the CPU kernels with bfloat16 weights (opt-in).
+    bf16: Option<mdrlat_nn::host::HostNet>,
 }
 
 impl std::fmt::Debug for GreedyPolicy {
@@ -169,6 +171,7 @@ impl GreedyPolicy {
             source,
             forward_batch: None,
             inputs: Vec::new(),
+            bf16: None,
         })
     }
 
@@ -188,6 +191,27 @@ impl GreedyPolicy {
         &self.net
     }
 
+    /// Opt-in reduced precision for inference: the linear layers read their weights
+    /// rounded to bfloat16 (half the bytes; products still summed in f32), which makes a
+    /// single decision — a pass over every weight, bound by memory — faster (MDRLAT on one
+    /// Sapphire Rapids core: 1.44 → 0.96 ms). Decisions can differ from the f32 network's
+    /// where two actions' Q-values are closer than the rounding; never the default.
+    ///
+    /// # Errors
+    /// The CPU lacks the kernel (AVX-512F), or the backend is not the CPU's.
+    pub fn with_bf16_weights(mut self) -> Result<Self, String> {
+        let host = self
+            .net
+            .host(&QNetConfig::new(self.variant))
+            .ok_or("bfloat16 weights need the cpu device (the host kernels)")?;
+        self.bf16 =
+            Some(host.with_bf16_weights().ok_or(
+                "bfloat16 weights need AVX-512F, which this CPU lacks (run without --bf16)",
+            )?);
+        self.source.push_str(", bf16 weights");
+        Ok(self)
+    }
+
     /// The variant.
     pub fn variant(&self) -> Variant {
         self.variant
@@ -204,7 +228,8 @@ impl GreedyPolicy {
     /// # Errors
     /// Inputs of the wrong size, or a backend failure.
     pub fn q_values(&self, inputs: &Inputs) -> Result<Vec<f32>, PolicyError> {
-        self.pool.install(|| q_forward(&self.net, self.variant, &self.device, inputs))
+        let host = self.bf16.as_ref();
+        self.pool.install(|| q_forward_with(&self.net, host, self.variant, &self.device, inputs))
     }
 }
 
@@ -234,6 +259,7 @@ impl Policy for GreedyPolicy {
             self.inputs.resize_with(chunks.len(), Inputs::default);
         }
         let (net, variant, device) = (&self.net, self.variant, &self.device);
+        let host = self.bf16.as_ref();
         let inputs = &mut self.inputs[..chunks.len()];
         let forward = || -> Result<Vec<Vec<f32>>, PolicyError> {
             self.pool.install(|| {
@@ -244,7 +270,7 @@ impl Policy for GreedyPolicy {
                     .map(|(chunk, inputs)| {
                         observation_inputs(chunk, variant, inputs);
                         pad_rows(inputs, rows);
-                        let mut q = q_forward(net, variant, device, inputs)?;
+                        let mut q = q_forward_with(net, host, variant, device, inputs)?;
                         q.truncate(chunk.len() * Action::COUNT);
                         Ok(q)
                     })

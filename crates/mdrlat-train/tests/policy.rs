@@ -123,3 +123,26 @@ fn a_model_stored_in_f16_loads_back_and_decides_alike() {
     assert!(e.contains("junk.safetensors"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn bf16_weights_are_an_opt_in_that_decides_nearly_alike() {
+    use mdrlat_train::export::compare_q;
+    let mut rng = Rng::seed_from_u64(8);
+    let observations: Vec<Observation> = (0..64).map(|_| observation(&mut rng)).collect();
+    let device = Device::flex();
+    let f32_policy = GreedyPolicy::untrained(Variant::Mdrlat, 3, &device, 1).expect("policy");
+    let bf16 = GreedyPolicy::untrained(Variant::Mdrlat, 3, &device, 1)
+        .expect("policy")
+        .with_bf16_weights();
+    let bf16 = match bf16 {
+        Ok(p) => p,
+        Err(e) => {
+            assert!(e.contains("AVX-512"), "{e}");
+            return;
+        }
+    };
+    assert!(bf16.source().ends_with("bf16 weights"), "{}", bf16.source());
+    let d = compare_q(&f32_policy, &bf16, &observations).expect("compare");
+    assert!(d.max_abs > 0.0 && d.max_abs < 2e-2 * d.max_q.max(1e-3), "{d:?}");
+    assert!(d.same_action * 10 >= observations.len() * 9, "{d:?}");
+}

@@ -6,8 +6,8 @@ use super::train::DeviceKind;
 use anyhow::Result;
 use mdrlat_nn::Variant;
 use mdrlat_train::bench::{
-    gemm_reference_gflops, infer_ms, policy_batch_ms, profile, replay_bytes, update_gflops,
-    update_ms,
+    decision_ms, gemm_reference_gflops, infer_ms, policy_batch_ms, profile, replay_bytes,
+    update_gflops, update_ms,
 };
 use std::time::Duration;
 
@@ -89,6 +89,12 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         let train_gflops = update_gflops(v, a.batch, train);
         let autodiff = a.compare_autodiff.then(|| update_ms(v, a.batch, &device, false, time));
         let (infer, n_infer) = infer_ms(v, &device, time, 1);
+        // Opt-in bfloat16 weights, beside f32 through the same policy path (cpu only).
+        let bf16 = (a.device == DeviceKind::Cpu).then(|| {
+            let f32_ms = decision_ms(v, false, time);
+            let bf16_ms = decision_ms(v, true, time);
+            (f32_ms, bf16_ms)
+        });
         let replay = replay_bytes(v, 20_000) as f64 / (1024.0 * 1024.0);
         let (batch_ms, batch_gflops) =
             policy_batch_ms(v, &device, 64, Some(EVAL_FORWARD_BATCH), threads, time);
@@ -117,6 +123,16 @@ pub fn run(a: &TrainArgs) -> Result<()> {
                     "threads": 1,
                     "ms": (infer * 1000.0).round() / 1000.0, "samples": n_infer})
             );
+            if let Some((Ok((f, nf)), Ok((b, nb)))) = &bf16 {
+                for (precision, ms, n) in [("f32", f, nf), ("bf16", b, nb)] {
+                    out!(
+                        "{}",
+                        serde_json::json!({"bench": "infer_policy", "variant": v.name(), "backend": backend,
+                            "threads": 1, "precision": precision,
+                            "ms": (ms * 1000.0).round() / 1000.0, "samples": n})
+                    );
+                }
+            }
             out!(
                 "{}",
                 serde_json::json!({"bench": "infer_batch", "variant": v.name(), "backend": backend,
@@ -134,6 +150,14 @@ pub fn run(a: &TrainArgs) -> Result<()> {
                 format!("{batch_ms:.1} ms, {batch_gflops:.1} ({:.2})", batch_gflops / reference);
             let step = format!("{train:.1}, {train_gflops:.1} ({:.2})", train_gflops / reference);
             out!("{:<11} {:>30} {:>22.2} {:>33} {:>13.0}", v.name(), step, infer, batched, replay);
+            match &bf16 {
+                Some((Ok((f, _)), Ok((b, _)))) => {
+                    let pair = format!("f32 {f:.2} / bf16 {b:.2}");
+                    out!("{:<11} {:>30} {:>22}", "  --bf16", "", pair);
+                }
+                Some((_, Err(e))) => out!("{:<11} {:>30} {e}", "  --bf16", ""),
+                _ => {}
+            }
             if let Some((ms, _)) = autodiff {
                 let gflops = update_gflops(v, a.batch, ms);
                 let step = format!("{ms:.1}, {gflops:.1} ({:.2})", gflops / reference);

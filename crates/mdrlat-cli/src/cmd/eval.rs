@@ -68,6 +68,10 @@ pub struct Args {
     /// CPU threads of the network's inference (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
+    /// Opt-in: the network's linear layers read bfloat16 weights (see `mdrlat ros --bf16`),
+    /// to measure what that precision does to the success rate. Needs AVX-512.
+    #[arg(long, requires = "checkpoint")]
+    bf16: bool,
     /// Threads stepping the simulator (0: all cores; measured faster than 1 even beside a
     /// network, which has the cores to itself while the simulator waits).
     #[arg(long, default_value_t = 0)]
@@ -152,6 +156,11 @@ pub fn run(a: &Args) -> Result<()> {
                     .map_err(anyhow::Error::msg)
                     .with_context(|| format!("--checkpoint {}", run.display()))?
                     .with_forward_batch(Some(a.forward_batch));
+                let p = if a.bf16 {
+                    p.with_bf16_weights().map_err(anyhow::Error::msg).context("--bf16")?
+                } else {
+                    p
+                };
                 let flops = QNetConfig::new(p.variant()).decision_flops() as f64;
                 (Box::new(p), Some(flops))
             }

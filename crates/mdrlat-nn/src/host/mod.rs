@@ -81,21 +81,39 @@ impl HostTensor {
 struct HostLinear {
     weight: HostTensor,
     bias: HostTensor,
+    /// The weight rounded to bfloat16, when inference was asked to read it so
+    /// ([`HostNet::with_bf16_weights`]).
+    bf16: Option<Vec<u16>>,
 }
 
 impl HostLinear {
     fn new(l: &burn::nn::Linear) -> Option<Self> {
-        Some(Self { weight: HostTensor::new(&l.weight)?, bias: HostTensor::new(l.bias.as_ref()?)? })
+        Some(Self {
+            weight: HostTensor::new(&l.weight)?,
+            bias: HostTensor::new(l.bias.as_ref()?)?,
+            bf16: None,
+        })
+    }
+
+    fn round_to_bf16(&mut self) {
+        self.bf16 = Some(self.weight.data().iter().map(|&w| gemm::to_bf16(w)).collect());
     }
 
     fn dims(&self) -> (usize, usize) {
         (self.weight.dims[0], self.weight.dims[1])
     }
 
-    /// `x · W + b`, `[batch, out]`.
+    /// `x · W + b`, `[batch, out]` (with bfloat16 weights, row by row).
     fn forward(&self, x: &[f32], batch: usize) -> Vec<f32> {
         let (din, dout) = self.dims();
         let mut y = self.bias.data().repeat(batch);
+        if let Some(w) = &self.bf16 {
+            let mut rows = x.chunks_exact(din).zip(y.chunks_exact_mut(dout));
+            if rows.all(|(x, y)| gemm::vec_by_bf16(din, dout, x, w, y)) {
+                return y;
+            }
+            unreachable!("bfloat16 weights exist only where their kernel does");
+        }
         gemm_short_by_long(batch, dout, din, x, self.weight.data(), &mut y, true);
         y
     }
@@ -622,6 +640,20 @@ impl HostNet {
         let mut lfeat = vec![0.0; b * p * c];
         flatten_into(&a, b, p, c, &mut lfeat, p * c, 0);
         ((cols, act), lfeat)
+    }
+
+    /// The same network reading its linear layers' weights rounded to bfloat16 (half the
+    /// bytes; products summed in f32): an opt-in for inference where memory bounds a
+    /// single decision. `None` where the CPU lacks the kernel (AVX-512). Only inference:
+    /// [`HostNet::backward`] of such a network is not the f32 network's gradient.
+    pub fn with_bf16_weights(mut self) -> Option<Self> {
+        if !gemm::bf16_available() {
+            return None;
+        }
+        for l in self.fusion.iter_mut().flatten().chain(self.heads.iter_mut().flatten()) {
+            l.round_to_bf16();
+        }
+        Some(self)
     }
 
     /// Q-values alone, `[B, actions]` (no auxiliary head, nothing kept).

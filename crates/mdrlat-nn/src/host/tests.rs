@@ -163,3 +163,22 @@ fn stacked_parts_give_each_part_its_own_values_and_gradients() {
         assert!(relative_error(&a.values, &b.values) < 1e-5, "{:?}", a.dims);
     }
 }
+
+/// bfloat16 weights for inference: Q-values close to the f32 network's (the weights alone
+/// are rounded), for every variant; a network without the kernel is not offered.
+#[test]
+fn bf16_weights_give_nearly_the_f32_q_values() {
+    let device = Device::flex();
+    for variant in Variant::ALL {
+        let case = Case::new(variant, 0, 3, 21);
+        let net = case.config.init(&device);
+        let f32_net = net.host(&case.config).expect("host");
+        let Some(bf16_net) = net.host(&case.config).expect("host").with_bf16_weights() else {
+            eprintln!("no AVX-512: bfloat16 inference is not offered here");
+            return;
+        };
+        let (want, got) = (f32_net.q_values(&case.inputs()), bf16_net.q_values(&case.inputs()));
+        let err = relative_error(&got, &want);
+        assert!(err > 0.0 && err < 2e-2, "{variant}: relative error {err}");
+    }
+}
