@@ -72,8 +72,12 @@ pub fn commands(plan: &Plan, job: &Job, threads: usize) -> Result<Vec<Vec<String
             if runs.is_empty() {
                 Vec::new()
             } else {
-                let mut argv =
-                    vec!["plot".into(), "--out".into(), path(&plan.dir.join("fig4.png"))];
+                let mut argv = vec![
+                    "plot".into(),
+                    "--by-variant".into(),
+                    "--out".into(),
+                    path(&plan.dir.join("fig4.png")),
+                ];
                 argv.extend(runs);
                 vec![argv]
             }

@@ -33,6 +33,45 @@ pub struct Args {
     /// What to plot.
     #[arg(long, value_enum, default_value = "eval")]
     metric: Metric,
+    /// One curve per network variant: the runs of a variant (other seeds) averaged, the
+    /// band their spread (± std over runs), as the paper's Fig. 4 draws six curves.
+    #[arg(long)]
+    by_variant: bool,
+}
+
+/// The runs' curves averaged per label's variant: mean over runs at each common step, band
+/// ± population std over runs (a single run keeps its own band).
+fn average_by_variant(series: Vec<(String, Series)>) -> Vec<Series> {
+    let mut groups: Vec<(String, Vec<Series>)> = Vec::new();
+    for (variant, s) in series {
+        match groups.iter_mut().find(|g| g.0 == variant) {
+            Some(g) => g.1.push(s),
+            None => groups.push((variant, vec![s])),
+        }
+    }
+    groups
+        .into_iter()
+        .map(|(variant, runs)| {
+            if runs.len() == 1 {
+                let mut one = runs.into_iter().next().expect("one run");
+                one.label = variant;
+                return one;
+            }
+            let len = runs.iter().map(|r| r.points.len()).min().unwrap_or(0);
+            let n = runs.len() as f32;
+            let mut points = Vec::with_capacity(len);
+            let mut band = Vec::with_capacity(len);
+            for i in 0..len {
+                let x = runs[0].points[i].0;
+                let ys: Vec<f32> = runs.iter().map(|r| r.points[i].1).collect();
+                let mean = ys.iter().sum::<f32>() / n;
+                let std = (ys.iter().map(|y| (y - mean).powi(2)).sum::<f32>() / n).sqrt();
+                points.push((x, mean));
+                band.push((x, mean - std, mean + std));
+            }
+            Series { label: format!("{variant} ({} runs)", runs.len()), points, band }
+        })
+        .collect()
 }
 
 /// Rows of a CSV file as (column name → values); empty cells are NaN.
@@ -90,7 +129,8 @@ fn smooth(values: &[f32], weight: f32) -> Vec<f32> {
         .collect()
 }
 
-fn run_label(dir: &Path) -> String {
+/// A run's label and its variant (from its `config.toml`; the folder name when unknown).
+fn run_label(dir: &Path) -> (String, String) {
     let name = dir
         .file_name()
         .map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned());
@@ -100,8 +140,9 @@ fn run_label(dir: &Path) -> String {
         })
     });
     match variant {
-        Some(v) if !name.contains(&v) => format!("{v} ({name})"),
-        _ => name,
+        Some(v) if !name.contains(&v) => (format!("{v} ({name})"), v),
+        Some(v) => (name, v),
+        None => (name.clone(), name),
     }
 }
 
@@ -112,7 +153,7 @@ pub fn run(a: &Args) -> Result<()> {
     }
     let mut series = Vec::new();
     for dir in &a.runs {
-        let label = run_label(dir);
+        let (label, variant) = run_label(dir);
         let s = match a.metric {
             Metric::Eval => {
                 let c = read_csv(
@@ -154,8 +195,13 @@ pub fn run(a: &Args) -> Result<()> {
         if s.points.is_empty() {
             bail!("{}: no data yet (no evaluation or log row written)", dir.display());
         }
-        series.push(s);
+        series.push((variant, s));
     }
+    let series: Vec<Series> = if a.by_variant {
+        average_by_variant(series)
+    } else {
+        series.into_iter().map(|(_, s)| s).collect()
+    };
     let (title, y) = match a.metric {
         Metric::Eval => ("Average accumulated reward (greedy, from fixed start poses)", "reward"),
         Metric::EpisodeReward => ("Training episode reward", "reward"),
@@ -169,13 +215,32 @@ pub fn run(a: &Args) -> Result<()> {
     );
     ensure_parent(&a.out)?;
     img.save_png(&a.out)?;
-    out!("wrote {} ({} runs, smoothing {})", a.out.display(), series.len(), a.smooth);
+    out!("wrote {} ({} curves, smoothing {})", a.out.display(), series.len(), a.smooth);
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn runs_of_a_variant_average_into_one_curve() {
+        let run = |ys: &[f32]| Series {
+            label: String::new(),
+            points: ys.iter().enumerate().map(|(i, &y)| (i as f32, y)).collect(),
+            band: Vec::new(),
+        };
+        let curves = average_by_variant(vec![
+            ("mdrlat".into(), run(&[1.0, 3.0, 5.0])),
+            ("multi".into(), run(&[2.0, 2.0])),
+            ("mdrlat".into(), run(&[3.0, 5.0])),
+        ]);
+        assert_eq!(curves.len(), 2);
+        assert_eq!(curves[0].label, "mdrlat (2 runs)");
+        assert_eq!(curves[0].points, [(0.0, 2.0), (1.0, 4.0)], "common steps only");
+        assert_eq!(curves[0].band, [(0.0, 1.0, 3.0), (1.0, 3.0, 5.0)]);
+        assert_eq!(curves[1].label, "multi");
+    }
 
     #[test]
     fn smoothing_is_debiased_and_skips_gaps() {
