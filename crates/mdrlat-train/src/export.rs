@@ -140,6 +140,21 @@ pub struct QDifference {
     pub same_action: usize,
 }
 
+impl std::fmt::Display for QDifference {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "on {} observations: max |ΔQ| {:.2e}, mean |ΔQ| {:.2e} (largest |Q| {:.2}); the same greedy action in {} of {}",
+            self.observations,
+            self.max_abs,
+            self.mean_abs,
+            self.max_q,
+            self.same_action,
+            self.observations
+        )
+    }
+}
+
 /// Compares the Q-values of `a` (the reference) and `b` on `observations`, in forwards of 64.
 ///
 /// # Errors

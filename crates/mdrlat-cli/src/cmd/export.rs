@@ -92,14 +92,8 @@ fn readme(
     let _ = writeln!(s, "- Exported from: `{}`.", policy.source());
     let _ = writeln!(
         s,
-        "- Stored against the f32 original on {} observations the model meets driving in office, furnished and crowd: \
-         max |ΔQ| {:.2e}, mean |ΔQ| {:.2e} (largest |Q| {:.2}); the same greedy action in {} of {}.",
-        diff.observations,
-        diff.max_abs,
-        diff.mean_abs,
-        diff.max_q,
-        diff.same_action,
-        diff.observations
+        "- Stored against the f32 original, {diff}, on observations the model meets driving in \
+         office, furnished and crowd."
     );
     let _ = writeln!(
         s,
@@ -169,17 +163,6 @@ pub fn run(a: &Args) -> Result<()> {
         eval_table.as_ref().map(|t| t.0.as_str()),
     );
     std::fs::write(a.out.join("README.md"), text).context("writing README.md")?;
-    out!(
-        "{}: {:?}, {:.1} MB; vs f32 on {} observations: max |dQ| {:.2e}, mean |dQ| {:.2e} (max |Q| {:.2}), same action {}/{}",
-        model.display(),
-        precision,
-        bytes as f64 / 1e6,
-        diff.observations,
-        diff.max_abs,
-        diff.mean_abs,
-        diff.max_q,
-        diff.same_action,
-        diff.observations
-    );
+    out!("{}: {precision:?}, {:.1} MB; against f32 {diff}", model.display(), bytes as f64 / 1e6);
     Ok(())
 }
