@@ -220,6 +220,10 @@ fn presets_print_and_bad_input_is_one_clear_line() {
         &mdrlat(&["reproduce", "--out", dir.join("nothing").to_str().unwrap_or_default()]),
         &["--preset or --sweep"],
     );
+    assert_clean_failure(
+        &mdrlat(&["reproduce", "--preset", "smoke", "--out", &d, "--wait"]),
+        &["--wait is for --executor slurm"],
+    );
     // Exporting what is not a run.
     let o = mdrlat(&[
         "export",

@@ -111,6 +111,24 @@ pub fn run(a: &Args) -> Result<()> {
         return Ok(());
     }
     let out = a.out.clone().context("--out is required")?;
+    if a.executor == Executor::Local {
+        let slurm_only = [
+            ("--dry-run", a.dry_run),
+            ("--wait", a.wait),
+            ("--partition", a.partition.is_some()),
+            ("--time", a.time.is_some()),
+            ("--gres", a.gres.is_some()),
+            ("--slurm-arg", !a.slurm_args.is_empty()),
+        ];
+        if let Some((flag, _)) = slurm_only.iter().find(|f| f.1) {
+            bail!(
+                "{flag} is for --executor slurm (the local executor runs the jobs and waits for them)"
+            );
+        }
+    }
+    if a.threads.is_some() && a.job.is_none() {
+        bail!("--threads is a job's (with --job); the local executor splits the cores by --jobs");
+    }
     if let Some(id) = &a.job {
         return run_job(&out, id, a.threads.unwrap_or_else(cores));
     }
