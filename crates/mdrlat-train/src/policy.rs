@@ -194,8 +194,9 @@ impl GreedyPolicy {
     /// Opt-in reduced precision for inference: the linear layers read their weights
     /// rounded to bfloat16 (half the bytes; products still summed in f32), which makes a
     /// single decision — a pass over every weight, bound by memory — faster (MDRLAT on one
-    /// Sapphire Rapids core: 1.56 → 0.98 ms, side by side). Decisions can differ from the f32 network's
-    /// where two actions' Q-values are closer than the rounding; never the default.
+    /// Sapphire Rapids core: 1.56 → 0.98 ms, side by side). Decisions can differ from the
+    /// f32 network's where two actions' Q-values are closer than the rounding; never the
+    /// default.
     ///
     /// # Errors
     /// The CPU lacks the kernel (AVX-512F), or the backend is not the CPU's.
