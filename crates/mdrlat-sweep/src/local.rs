@@ -91,11 +91,7 @@ pub fn run(
         let status = child
             .wait()
             .map_err(|e| SweepError::Io { what: "waiting for the tables job".into(), source: e })?;
-        let ok = status.success() && plan.state(tables) == JobState::Done;
-        if !ok && !matches!(plan.state(tables), JobState::Failed(_)) {
-            plan.mark_failed(tables, &format!("{status}; log {}", plan.log_name(tables)))?;
-        }
-        on_event(&Event::Finished(tables.id.clone(), ok, started.elapsed().as_secs_f64()));
+        ended(plan, tables, status, started, &mut on_event)?;
     }
     outcome(plan)
 }
@@ -152,17 +148,29 @@ fn schedule(
             match status {
                 Some(status) => {
                     let (id, _, started) = running.swap_remove(i);
-                    let job = plan.job(&id)?;
-                    let ok = status.success() && plan.state(job) == JobState::Done;
-                    if !ok && !matches!(plan.state(job), JobState::Failed(_)) {
-                        plan.mark_failed(job, &format!("{status}; log {}", plan.log_name(job)))?;
-                    }
-                    on_event(&Event::Finished(id, ok, started.elapsed().as_secs_f64()));
+                    ended(plan, plan.job(&id)?, status, started, on_event)?;
                 }
                 None => i += 1,
             }
         }
     }
+    Ok(())
+}
+
+/// A job's process ended: it succeeded only if it also marked the job done; a failure it did
+/// not record itself (a crash, a signal) is recorded with its exit status and log.
+fn ended(
+    plan: &Plan,
+    job: &Job,
+    status: std::process::ExitStatus,
+    started: Instant,
+    on_event: &mut impl FnMut(&Event),
+) -> Result<(), SweepError> {
+    let ok = status.success() && plan.state(job) == JobState::Done;
+    if !ok && !matches!(plan.state(job), JobState::Failed(_)) {
+        plan.mark_failed(job, &format!("{status}; log {}", plan.log_name(job)))?;
+    }
+    on_event(&Event::Finished(job.id.clone(), ok, started.elapsed().as_secs_f64()));
     Ok(())
 }
 
