@@ -52,8 +52,8 @@ pub fn job_command(exe: &Path, plan: &Plan, job: &Job, threads: usize) -> Comman
     c
 }
 
-fn ready(plan: &Plan, job: &Job, running: &[(String, Child, Instant)]) -> bool {
-    if running.iter().any(|r| r.0 == job.id) {
+fn ready(plan: &Plan, job: &Job, running: &[&str]) -> bool {
+    if running.contains(&job.id.as_str()) {
         return false;
     }
     match job.kind {
@@ -96,6 +96,17 @@ pub fn run(
     outcome(plan)
 }
 
+/// The job to start next: an evaluation whose model is trained before any further
+/// training, so that finished cells (and their small result files) exist as early as
+/// possible, whatever cuts the sweep short; otherwise in the sweep's order.
+fn next_job<'p>(plan: &'p Plan, attempted: &[String], running: &[&str]) -> Option<&'p Job> {
+    let runnable = |j: &&Job| {
+        !attempted.contains(&j.id) && plan.state(j) != JobState::Done && ready(plan, j, running)
+    };
+    let evals = plan.eval_jobs().find(runnable);
+    evals.or_else(|| plan.jobs.iter().find(runnable))
+}
+
 /// Runs every job but the tables, `opts.jobs` at a time, until none can run.
 fn schedule(
     plan: &Plan,
@@ -114,12 +125,8 @@ fn schedule(
     }
     loop {
         while running.len() < opts.jobs.max(1) {
-            let next = plan.jobs.iter().find(|j| {
-                !attempted.contains(&j.id)
-                    && plan.state(j) != JobState::Done
-                    && ready(plan, j, running)
-            });
-            let Some(job) = next else { break };
+            let ids: Vec<&str> = running.iter().map(|r| r.0.as_str()).collect();
+            let Some(job) = next_job(plan, &attempted, &ids) else { break };
             attempted.push(job.id.clone());
             running.push((
                 job.id.clone(),
@@ -218,4 +225,31 @@ pub fn outcome(plan: &Plan) -> Result<(), SweepError> {
         })
         .collect();
     if unfinished.is_empty() { Ok(()) } else { Err(SweepError::Failed(unfinished)) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spec::Sweep;
+
+    #[test]
+    fn a_trained_model_is_evaluated_before_more_training() {
+        let dir = std::env::temp_dir().join(format!("mdrlat-sweep-next-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let plan = Plan::new(Sweep::preset("cpu-small").expect("preset"), &dir);
+        plan.open().expect("open");
+        let next = |attempted: &[String], running: &[&str]| {
+            next_job(&plan, attempted, running).map(|j| j.id.clone())
+        };
+        // Nothing trained: the baseline (which needs nothing), then training in order.
+        assert_eq!(next(&[], &[]).as_deref(), Some("eval/wander"));
+        let tried = vec!["eval/wander".to_string()];
+        assert_eq!(next(&tried, &[]).as_deref(), Some("train/laser-only-s0"));
+        assert_eq!(next(&tried, &["train/laser-only-s0"]).as_deref(), Some("train/laser-only-s1"));
+        // laser-only-s0 trained: its evaluation jumps ahead of depth-only's training.
+        plan.mark_done(plan.job("train/laser-only-s0").expect("job")).expect("mark");
+        let tried = vec!["eval/wander".into(), "train/laser-only-s1".into()];
+        assert_eq!(next(&tried, &[]).as_deref(), Some("eval/laser-only-s0"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
