@@ -11,6 +11,7 @@
 //! its queries in its own local frame; world-frame versions transform the ray.
 
 pub mod aabb;
+pub mod distance;
 pub mod grid;
 pub mod math;
 pub mod prism;
@@ -18,6 +19,7 @@ pub mod query;
 pub mod shape;
 
 pub use aabb::Aabb;
+pub use distance::distance_sq;
 pub use grid::{Grid, GridScratch};
 pub use math::{Pose2, Vec2};
 pub use prism::Prism;

@@ -293,7 +293,7 @@ fn spawn_regions(
         let (g, f) = resample(grid, frame, bounds);
         (Cow::Owned(g), f)
     };
-    let distance_sq = grid::distance_sq(&grid.mask(&blocked), grid.width);
+    let distance_sq = mdrlat_geom::distance_sq(&grid.mask(&blocked), grid.width);
     let limit_sq = (f64::from(clearance) / frame.res).powi(2);
     let mut mask: Vec<bool> = grid
         .cells
