@@ -14,8 +14,9 @@ pub mod rng;
 pub use action::{Action, TABLE_1, Velocity};
 pub use obs::{
     DEPTH_COLS, DEPTH_HFOV_DEG, DEPTH_LEN, DEPTH_MIN_RANGE_M, DEPTH_ROWS, DEPTH_VFOV_DEG,
-    FRAME_STACK, FrameStack, LASER_BEAMS, LASER_FOV_DEG, LASER_MAX_RANGE_M, ODOM_HISTORY,
-    Observation, laser_beam_angle, normalize_depth, normalize_laser,
+    FRAME_STACK, FrameStack, GOAL_DIM, GOAL_NORM_M, LASER_BEAMS, LASER_FOV_DEG, LASER_MAX_RANGE_M,
+    ODOM_HISTORY, Observation, goal_in_robot_frame, laser_beam_angle, normalize_depth,
+    normalize_goal, normalize_laser,
 };
 pub use policy::{Policy, PolicyError, Sensors, catch_panic, check_batch, greedy_actions};
 pub use rng::Rng;

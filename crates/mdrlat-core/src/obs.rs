@@ -3,7 +3,8 @@
 //! Sensors produce frames in metres. The network sees them normalised as in the authors'
 //! code (SPEC §2): laser / 5.6; depth clamped to [0, 10] m, then / 5. Both the training code
 //! and the ROS node call [`normalize_laser`] and [`normalize_depth`], so sim-to-real never
-//! depends on two copies agreeing.
+//! depends on two copies agreeing. The navigation task adds the goal in the robot's frame
+//! ([`goal_in_robot_frame`], [`normalize_goal`]), defined here for the same reason.
 
 use crate::action::Velocity;
 
@@ -37,6 +38,36 @@ pub const DEPTH_MIN_RANGE_M: f32 = 0.4;
 pub const DEPTH_HFOV_DEG: f32 = 58.0;
 /// The depth camera's vertical field of view (SPEC §2).
 pub const DEPTH_VFOV_DEG: f32 = 45.0;
+
+/// Length of the goal input of the navigation task: distance, sin and cos of the bearing.
+pub const GOAL_DIM: usize = 3;
+/// The goal's distance is divided by this (metres) for the network.
+pub const GOAL_NORM_M: f32 = 10.0;
+
+/// The goal `(goal_x, goal_y)` seen from a robot at `(x, y)` heading `yaw` (radians, world
+/// frame): `[distance m, sin(bearing), cos(bearing)]`, the bearing counter-clockwise from
+/// the robot's heading. At the goal itself the bearing is taken as 0 (`[0, 0, 1]`).
+pub fn goal_in_robot_frame(x: f32, y: f32, yaw: f32, goal_x: f32, goal_y: f32) -> [f32; GOAL_DIM] {
+    let (dx, dy) = (goal_x - x, goal_y - y);
+    let distance = dx.hypot(dy);
+    if distance <= f32::EPSILON {
+        return [0.0, 0.0, 1.0];
+    }
+    let (s, c) = yaw.sin_cos();
+    // The goal's direction rotated into the robot frame, as a unit vector: (cos b, sin b).
+    let (ahead, left) = ((c * dx + s * dy) / distance, (-s * dx + c * dy) / distance);
+    [distance, left, ahead]
+}
+
+/// The goal input as the network reads it: distance / [`GOAL_NORM_M`], sin and cos as they
+/// are. A non-finite distance (which a sane source never gives) reads as "far ahead".
+pub fn normalize_goal(goal: &[f32; GOAL_DIM]) -> [f32; GOAL_DIM] {
+    let [d, s, c] = *goal;
+    if !(d.is_finite() && s.is_finite() && c.is_finite()) {
+        return [1.0, 0.0, 1.0];
+    }
+    [d / GOAL_NORM_M, s, c]
+}
 
 /// The angle of laser beam `i` of [`LASER_BEAMS`], radians, counter-clockwise from ahead.
 pub fn laser_beam_angle(i: usize) -> f32 {
@@ -150,6 +181,9 @@ pub struct Observation {
     pub depth: FrameStack,
     /// True `(v, ω)` at `t−2`, `t−1`, `t`.
     pub odom: [Velocity; ODOM_HISTORY],
+    /// The navigation task's goal in the robot frame ([`goal_in_robot_frame`], metres),
+    /// `None` in the obstacle-avoidance task.
+    pub goal: Option<[f32; GOAL_DIM]>,
 }
 
 impl Observation {
@@ -159,6 +193,7 @@ impl Observation {
             laser: FrameStack::new(LASER_BEAMS),
             depth: FrameStack::new(DEPTH_LEN),
             odom: [Velocity::default(); ODOM_HISTORY],
+            goal: None,
         }
     }
 }
@@ -173,6 +208,20 @@ impl PartialEq for FrameStack {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_goal_is_seen_in_the_robot_frame() {
+        let close = |a: [f32; 3], b: [f32; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6);
+        // Ahead, left, behind, right of a robot facing +y at (1, 1).
+        let yaw = std::f32::consts::FRAC_PI_2;
+        assert!(close(goal_in_robot_frame(1.0, 1.0, yaw, 1.0, 3.0), [2.0, 0.0, 1.0]));
+        assert!(close(goal_in_robot_frame(1.0, 1.0, yaw, -2.0, 1.0), [3.0, 1.0, 0.0]));
+        assert!(close(goal_in_robot_frame(1.0, 1.0, yaw, 1.0, 0.0), [1.0, 0.0, -1.0]));
+        assert!(close(goal_in_robot_frame(1.0, 1.0, yaw, 2.0, 1.0), [1.0, -1.0, 0.0]));
+        assert_eq!(goal_in_robot_frame(1.0, 1.0, 0.3, 1.0, 1.0), [0.0, 0.0, 1.0]);
+        assert_eq!(normalize_goal(&[5.0, 0.6, 0.8]), [0.5, 0.6, 0.8]);
+        assert_eq!(normalize_goal(&[f32::NAN, 0.6, 0.8]), [1.0, 0.0, 1.0]);
+    }
 
     #[test]
     fn normalisation_follows_the_authors_code() {

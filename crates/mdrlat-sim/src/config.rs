@@ -30,6 +30,85 @@ pub struct SimConfig {
     /// pedestrian's path as well: pedestrians do not avoid the robot, so a start next to
     /// one walking at it would be lost before the policy could act.
     pub spawn_pedestrian_horizon_s: f32,
+    /// What the robot is asked to do: avoid obstacles (the paper's task, the default) or
+    /// reach a goal (the paper's navigation extension).
+    pub task: Task,
+    /// The navigation task's goals and reward (unused by obstacle avoidance).
+    pub nav: NavConfig,
+}
+
+/// The task of an episode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Task {
+    /// Drive without collision until the time limit (paper sections 2–3; Table 2).
+    #[default]
+    Avoid,
+    /// Reach a goal drawn in the world's goal regions (paper section 3.1, Figures 8 and 9).
+    Nav,
+}
+
+impl Task {
+    /// `avoid` or `nav`, as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Task::Avoid => "avoid",
+            Task::Nav => "nav",
+        }
+    }
+}
+
+impl std::fmt::Display for Task {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Task {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "avoid" => Ok(Task::Avoid),
+            "nav" => Ok(Task::Nav),
+            other => Err(format!("unknown task '{other}' (expected avoid or nav)")),
+        }
+    }
+}
+
+/// The navigation task (the authors published no navigation code: every value is ours and
+/// the README says why). The reward follows Xie et al. (the paper's ref. 10) in its terms:
+/// an arrival bonus, the collision penalty (`reward.collision`), progress towards the goal,
+/// and the paper's own proximity and swing penalties (eqs. 5, 6); the forward-speed term of
+/// eq. (4) is replaced by the progress term.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NavConfig {
+    /// The episode succeeds when the robot's centre comes this close to the goal, metres.
+    pub goal_radius_m: f32,
+    /// Drawn goals lie at least this far from the start, metres.
+    pub min_start_goal_m: f32,
+    /// Reward of reaching the goal; the episode terminates.
+    pub arrival: f32,
+    /// Reward per metre the distance to the goal shrank in a step (negative when it grew).
+    pub progress: f32,
+    /// A fixed start `[x, y, yaw_deg]` for every episode instead of a drawn one.
+    pub start: Option<[f32; 3]>,
+    /// A fixed goal `[x, y]` for every episode instead of a drawn one.
+    pub goal: Option<[f32; 2]>,
+}
+
+impl Default for NavConfig {
+    fn default() -> Self {
+        Self {
+            goal_radius_m: 0.3,
+            min_start_goal_m: 2.0,
+            arrival: 10.0,
+            progress: 2.5,
+            start: None,
+            goal: None,
+        }
+    }
 }
 
 impl Default for SimConfig {
@@ -44,6 +123,8 @@ impl Default for SimConfig {
             reward: RewardConfig::default(),
             spawn_clearance_m: mdrlat_core::robot::SPAWN_CLEARANCE_M,
             spawn_pedestrian_horizon_s: 1.0,
+            task: Task::Avoid,
+            nav: NavConfig::default(),
         }
     }
 }
@@ -259,6 +340,31 @@ impl SimConfig {
                 field: "reward",
                 problem: "all values must be finite".into(),
             });
+        }
+        let n = &self.nav;
+        if !(n.goal_radius_m.is_finite() && n.goal_radius_m > 0.0) {
+            return Err(ConfigError {
+                field: "nav.goal_radius_m",
+                problem: format!("must be positive, got {}", n.goal_radius_m),
+            });
+        }
+        if !(n.min_start_goal_m.is_finite() && n.min_start_goal_m >= 0.0) {
+            return Err(ConfigError {
+                field: "nav.min_start_goal_m",
+                problem: format!("must be >= 0, got {}", n.min_start_goal_m),
+            });
+        }
+        if !(n.arrival.is_finite() && n.progress.is_finite()) {
+            return Err(ConfigError {
+                field: "nav",
+                problem: "arrival and progress must be finite".into(),
+            });
+        }
+        if n.start.is_some_and(|s| !s.iter().all(|v| v.is_finite())) {
+            return Err(ConfigError { field: "nav.start", problem: "must be finite".into() });
+        }
+        if n.goal.is_some_and(|g| !g.iter().all(|v| v.is_finite())) {
+            return Err(ConfigError { field: "nav.goal", problem: "must be finite".into() });
         }
         Ok(())
     }

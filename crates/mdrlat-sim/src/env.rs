@@ -1,14 +1,15 @@
 //! The environment, Gymnasium-style: `reset(seed)` then `step(action)` returning the
 //! observation, the reward, `terminated` and `truncated` (never a merged `done`), and info.
 
-use crate::config::{ConfigError, SimConfig};
+use crate::config::{ConfigError, SimConfig, Task};
 use crate::pedestrians::{self, PedestrianState};
-use crate::reward::{RewardTerms, reward};
+use crate::reward::{NavStep, RewardTerms, nav_reward, reward};
 use crate::robot::RobotState;
 use crate::scene::StaticScene;
 use crate::sensors::{DepthCamera, Laser};
 use mdrlat_core::{
     Action, DEPTH_LEN, FRAME_STACK, FrameStack, LASER_BEAMS, ODOM_HISTORY, Rng, Velocity,
+    goal_in_robot_frame,
 };
 use mdrlat_geom::{GridScratch, Pose2, Prism, Vec2};
 use mdrlat_world::World;
@@ -54,6 +55,8 @@ pub struct StepInfo {
     pub d_min: f32,
     /// Set when the step ended in a collision.
     pub collision: Option<Collision>,
+    /// The navigation task's robot reached its goal (the episode terminated in success).
+    pub reached_goal: bool,
     /// The reward's terms.
     pub reward_terms: RewardTerms,
 }
@@ -63,9 +66,9 @@ pub struct StepInfo {
 pub struct Step<'a> {
     /// The observation after the step.
     pub observation: &'a Observation,
-    /// Paper eq. (3).
+    /// Paper eq. (3) (the navigation reward in the navigation task).
     pub reward: f32,
-    /// A collision ended the episode: do not bootstrap.
+    /// A collision (or, navigating, reaching the goal) ended the episode: do not bootstrap.
     pub terminated: bool,
     /// The time limit ended the episode: bootstrap from `observation`.
     pub truncated: bool,
@@ -101,6 +104,14 @@ pub enum SimError {
         /// What is wrong.
         problem: String,
     },
+    /// The navigation task cannot run in this world with these settings.
+    #[error("world '{world}', task nav: {problem}")]
+    Nav {
+        /// World name.
+        world: String,
+        /// What is wrong.
+        problem: String,
+    },
     /// A VecEnv worker thread stopped (it panicked).
     #[error("a VecEnv worker thread stopped unexpectedly")]
     WorkerDied,
@@ -131,6 +142,47 @@ fn check_world(world: &World) -> Result<(), SimError> {
     Ok(())
 }
 
+/// The navigation task's demands on the world: goal regions (or a fixed goal) and a fixed
+/// start and goal inside the bounds with room for the robot.
+fn check_nav(scene: &StaticScene, config: &SimConfig) -> Result<(), SimError> {
+    let world = &scene.world;
+    let bad = |problem: String| Err(SimError::Nav { world: world.name.clone(), problem });
+    let nav = &config.nav;
+    if nav.goal.is_none() && !world.goals.iter().any(|r| r.area() > 0.0) {
+        return bad("the world has no goal region (a `goal` key in its file); add one or fix \
+                    the goal with --goal X,Y"
+            .into());
+    }
+    let radius = config.robot.radius_m;
+    let (mut scratch, mut buf) = (GridScratch::default(), Vec::new());
+    let mut check = |what: &str, p: Vec2| -> Result<(), SimError> {
+        let b = &world.bounds;
+        if !b.contains(p) {
+            return bad(format!(
+                "{what} ({:.2}, {:.2}) is outside the world's bounds ({:.2}, {:.2})..({:.2}, {:.2})",
+                p.x, p.y, b.min.x, b.min.y, b.max.x, b.max.y
+            ));
+        }
+        if let Some(i) = scene.body_contact(p, radius, &mut scratch, &mut buf) {
+            let label =
+                world.obstacles.get(i).and_then(|o| o.label.as_deref()).unwrap_or("unlabelled");
+            return bad(format!(
+                "{what} ({:.2}, {:.2}) is inside obstacle {i} ('{label}') or closer to it than \
+                 the robot's radius {radius} m",
+                p.x, p.y
+            ));
+        }
+        Ok(())
+    };
+    if let Some([x, y]) = nav.goal {
+        check("the goal (--goal, nav.goal)", Vec2::new(x, y))?;
+    }
+    if let Some([x, y, _]) = nav.start {
+        check("the start (--start, nav.start)", Vec2::new(x, y))?;
+    }
+    Ok(())
+}
+
 /// Everything that changes while an environment runs: enough to continue an episode
 /// exactly where it was (for training checkpoints). The world and settings are not part of
 /// it; restore into an environment built from the same ones.
@@ -156,6 +208,12 @@ pub struct EnvState {
     pub w_prev: f32,
     /// An episode is running.
     pub running: bool,
+    /// The navigation task's goal (absent in obstacle avoidance and in older states).
+    #[serde(default)]
+    pub goal: Option<Vec2>,
+    /// The distance to it after the last step, metres.
+    #[serde(default)]
+    pub goal_distance: f32,
 }
 
 /// One simulated robot in one world.
@@ -176,6 +234,10 @@ pub struct Env {
     steps: u32,
     w_prev: f32,
     running: bool,
+    /// The navigation task's goal of this episode.
+    goal: Option<Vec2>,
+    /// The distance to it after the last step, metres.
+    goal_distance: f32,
     scratch: GridScratch,
     buf: Vec<u32>,
 }
@@ -188,6 +250,9 @@ impl Env {
     pub fn new(scene: Arc<StaticScene>, config: SimConfig) -> Result<Self, SimError> {
         config.validate()?;
         check_world(&scene.world)?;
+        if config.task == Task::Nav {
+            check_nav(&scene, &config)?;
+        }
         Ok(Self {
             laser: Laser::new(&config.laser),
             depth: DepthCamera::new(&config.depth),
@@ -202,6 +267,8 @@ impl Env {
             steps: 0,
             w_prev: 0.0,
             running: false,
+            goal: None,
+            goal_distance: 0.0,
             scratch: GridScratch::default(),
             buf: Vec::new(),
         })
@@ -258,10 +325,19 @@ impl Env {
 
     fn start_episode(&mut self, pose: Option<Pose2>) -> Result<&Observation, SimError> {
         self.pedestrians = pedestrians::reset(&self.scene.world.pedestrians, &mut self.rng);
-        let pose = match pose {
-            Some(p) => p,
-            None => self.sample_pose()?,
+        let nav = (self.config.task == Task::Nav).then(|| self.config.nav.clone());
+        let pose = match (pose, nav.as_ref().and_then(|n| n.start)) {
+            (Some(p), _) => p,
+            (None, Some([x, y, yaw_deg])) => Pose2::new(x, y, yaw_deg.to_radians()),
+            (None, None) => self.sample_pose()?,
         };
+        // Obstacle avoidance draws nothing more: its streams are what they always were.
+        self.goal = match nav.map(|n| n.goal) {
+            None => None,
+            Some(Some([x, y])) => Some(Vec2::new(x, y)),
+            Some(None) => Some(self.sample_goal(pose.position())?),
+        };
+        self.goal_distance = self.goal.map_or(0.0, |g| (g - pose.position()).length());
         self.robot = RobotState { pose, velocity: Velocity::default() };
         self.steps = 0;
         self.w_prev = 0.0;
@@ -332,6 +408,46 @@ impl Env {
         Err(SimError::NoFreePose { world: world.name.clone(), attempts: SPAWN_ATTEMPTS })
     }
 
+    /// A goal in the goal regions (area-weighted, uniform within a region) where the robot
+    /// fits with the spawn clearance, at least `nav.min_start_goal_m` from `start`.
+    fn sample_goal(&mut self, start: Vec2) -> Result<Vec2, SimError> {
+        let world = &self.scene.world;
+        let total: f32 = world.goals.iter().map(|r| r.area()).sum();
+        let clearance = self.config.robot.radius_m + self.config.spawn_clearance_m;
+        let min_distance = self.config.nav.min_start_goal_m;
+        for _ in 0..SPAWN_ATTEMPTS {
+            let mut pick = self.rng.uniform() as f32 * total;
+            let Some(region) = world
+                .goals
+                .iter()
+                .find(|r| {
+                    pick -= r.area();
+                    pick <= 0.0
+                })
+                .or(world.goals.last())
+            else {
+                break;
+            };
+            let p = Vec2::new(
+                self.rng.range_f32(region.min.x, region.max.x),
+                self.rng.range_f32(region.min.y, region.max.y),
+            );
+            if (p - start).length() >= min_distance
+                && self.scene.body_contact(p, clearance, &mut self.scratch, &mut self.buf).is_none()
+            {
+                return Ok(p);
+            }
+        }
+        Err(SimError::Nav {
+            world: world.name.clone(),
+            problem: format!(
+                "no free goal at least {min_distance} m (nav.min_start_goal_m) from the start \
+                 ({:.2}, {:.2}) in {SPAWN_ATTEMPTS} attempts",
+                start.x, start.y
+            ),
+        })
+    }
+
     /// Renders both sensors at the current state into the next frame slots.
     fn sense(&mut self) {
         pedestrians::write_prisms(
@@ -354,6 +470,7 @@ impl Env {
             &mut self.noise_rng,
             self.obs.depth.push_slot(),
         );
+        self.obs.goal = self.goal.map(|g| goal_in_robot_frame(pose.x, pose.y, pose.yaw, g.x, g.y));
     }
 
     fn contact(&mut self) -> Option<Collision> {
@@ -405,10 +522,28 @@ impl Env {
         let velocity = self.robot.velocity;
         self.obs.odom.rotate_left(1);
         self.obs.odom[ODOM_HISTORY - 1] = velocity;
-        let terms = reward(&self.config.reward, collision.is_some(), velocity, self.w_prev, d_min);
+        let mut reached_goal = false;
+        let terms = match self.goal {
+            None => reward(&self.config.reward, collision.is_some(), velocity, self.w_prev, d_min),
+            Some(goal) => {
+                let distance = (goal - self.robot.pose.position()).length();
+                reached_goal = collision.is_none() && distance <= self.config.nav.goal_radius_m;
+                let progress_m = self.goal_distance - distance;
+                self.goal_distance = distance;
+                let step = NavStep {
+                    collided: collision.is_some(),
+                    reached: reached_goal,
+                    w: velocity.w,
+                    w_prev: self.w_prev,
+                    d_min,
+                    progress_m,
+                };
+                nav_reward(&self.config.reward, &self.config.nav, step)
+            }
+        };
         self.w_prev = velocity.w;
         self.steps += 1;
-        let terminated = collision.is_some();
+        let terminated = collision.is_some() || reached_goal;
         let truncated = !terminated && self.steps >= self.config.max_episode_steps;
         self.running = !(terminated || truncated);
         Ok(Step {
@@ -423,6 +558,7 @@ impl Env {
                 command,
                 d_min,
                 collision,
+                reached_goal,
                 reward_terms: terms,
             },
         })
@@ -442,6 +578,8 @@ impl Env {
             steps: self.steps,
             w_prev: self.w_prev,
             running: self.running,
+            goal: self.goal,
+            goal_distance: self.goal_distance,
         }
     }
 
@@ -465,6 +603,13 @@ impl Env {
         if state.pedestrians.iter().zip(n).any(|(p, n)| p.target >= n) {
             return Err(bad("saved pedestrian state names a waypoint the world lacks".into()));
         }
+        if (self.config.task == Task::Nav) != state.goal.is_some() {
+            return Err(bad(format!(
+                "saved state is of the {} task, this environment runs {}",
+                if state.goal.is_some() { "nav" } else { "avoid" },
+                self.config.task
+            )));
+        }
         if state.laser_frames.len() != FRAME_STACK * LASER_BEAMS
             || state.depth_frames.len() != FRAME_STACK * DEPTH_LEN
         {
@@ -485,6 +630,10 @@ impl Env {
         self.steps = state.steps;
         self.w_prev = state.w_prev;
         self.running = state.running;
+        self.goal = state.goal;
+        self.goal_distance = state.goal_distance;
+        let pose = self.robot.pose;
+        self.obs.goal = self.goal.map(|g| goal_in_robot_frame(pose.x, pose.y, pose.yaw, g.x, g.y));
         Ok(())
     }
 
@@ -541,5 +690,10 @@ impl Env {
     /// Steps taken in the current episode.
     pub fn episode_steps(&self) -> u32 {
         self.steps
+    }
+
+    /// The navigation task's goal of the current episode (`None` in obstacle avoidance).
+    pub fn goal(&self) -> Option<Vec2> {
+        self.goal
     }
 }
