@@ -184,6 +184,10 @@ pub struct Observation {
     /// The navigation task's goal in the robot frame ([`goal_in_robot_frame`], metres),
     /// `None` in the obstacle-avoidance task.
     pub goal: Option<[f32; GOAL_DIM]>,
+    /// `[x m, y m, yaw rad]` in the world frame: the simulator's ground truth (on a robot,
+    /// its localisation on the map). No learned policy reads it; the classical planner
+    /// does, as move_base reads AMCL's pose. `None` where nothing provides it.
+    pub pose: Option<[f32; 3]>,
 }
 
 impl Observation {
@@ -194,6 +198,7 @@ impl Observation {
             depth: FrameStack::new(DEPTH_LEN),
             odom: [Velocity::default(); ODOM_HISTORY],
             goal: None,
+            pose: None,
         }
     }
 }

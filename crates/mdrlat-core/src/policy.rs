@@ -6,7 +6,7 @@
 //! the ROS node and the tests all call it, so acting has one definition — including the one
 //! rule for Q-values that are not finite ([`greedy_actions`]).
 
-use crate::action::Action;
+use crate::action::{Action, Velocity};
 use crate::obs::Observation;
 use std::fmt;
 
@@ -96,6 +96,27 @@ pub trait Policy: Send {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError>;
+
+    /// The velocity command of each observation of `batch` into `commands` (cleared first),
+    /// with [`Policy::act`]'s actions in `actions`: by default each action's Table 1
+    /// velocity. A continuous controller (the classical planner) overrides it with its own
+    /// velocities, and its actions are then the nearest Table 1 ones, for the records. The
+    /// episode runner drives the robot with these commands.
+    ///
+    /// # Errors
+    /// As [`Policy::act`].
+    fn commands(
+        &mut self,
+        batch: &[&Observation],
+        slots: &[usize],
+        actions: &mut Vec<Action>,
+        commands: &mut Vec<Velocity>,
+    ) -> Result<(), PolicyError> {
+        self.act(batch, slots, actions)?;
+        commands.clear();
+        commands.extend(actions.iter().map(|a| a.command()));
+        Ok(())
+    }
 }
 
 /// Checks that every observation of a batch comes with its slot.

@@ -9,7 +9,7 @@
 //! environments the evaluation has.
 
 use crate::EvalError;
-use mdrlat_core::{Action, Observation, Policy, PolicyError, Rng, Sensors};
+use mdrlat_core::{Action, Observation, Policy, PolicyError, Rng, Sensors, Velocity};
 use mdrlat_geom::Pose2;
 use mdrlat_sim::{
     Collision, EpisodeOutcome, EpisodeSpec, Observer, RunOptions, SimConfig, StaticScene, VecEnv,
@@ -194,10 +194,30 @@ impl Policy for Timed<'_> {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
+        self.timed(batch.len(), |inner| inner.act(batch, slots, out))
+    }
+    fn commands(
+        &mut self,
+        batch: &[&Observation],
+        slots: &[usize],
+        actions: &mut Vec<Action>,
+        commands: &mut Vec<Velocity>,
+    ) -> Result<(), PolicyError> {
+        self.timed(batch.len(), |inner| inner.commands(batch, slots, actions, commands))
+    }
+}
+
+impl Timed<'_> {
+    /// Runs one decision of `n` observations, adding its time.
+    fn timed(
+        &mut self,
+        n: usize,
+        decide: impl FnOnce(&mut dyn Policy) -> Result<(), PolicyError>,
+    ) -> Result<(), PolicyError> {
         let t = Instant::now();
-        let r = self.inner.act(batch, slots, out);
+        let r = decide(&mut *self.inner);
         self.busy += t.elapsed();
-        self.decisions += batch.len() as u64;
+        self.decisions += n as u64;
         self.batches += 1;
         r
     }

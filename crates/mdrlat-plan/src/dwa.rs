@@ -68,14 +68,14 @@ impl Default for DwaConfig {
     fn default() -> Self {
         Self {
             radius_m: mdrlat_core::robot::RADIUS_M,
-            margin_m: 0.05,
+            margin_m: 0.02,
             horizon_s: 1.6,
             step_s: 0.1,
             control_dt_s: 0.2,
             v_samples: 6,
             w_samples: 21,
             lookahead_m: 0.8,
-            path_weight: 1.0,
+            path_weight: 3.0,
             target_weight: 1.0,
             heading_weight: 0.4,
             clearance_weight: 0.4,

@@ -13,12 +13,18 @@
 //!   those that would hit a point of the current laser scan, score the rest on following
 //!   the plan, heading to it, clearance and speed.
 //!
+//! - [`PlannerPolicy`]: both as a [`mdrlat_core::Policy`] (`--policy planner`): the global
+//!   plan at the start of each episode (and when the robot strays from it), the local planner
+//!   every step, continuous velocity commands.
+//!
 //! Nothing here is random: the same inputs give the same plan and the same commands.
 
 mod astar;
 mod dwa;
 mod grid;
+mod policy;
 
 pub use astar::{Path, PlanError, astar};
 pub use dwa::{Dwa, DwaConfig, Limits};
 pub use grid::{Cell, CostMap, MapKind, OccupancyGrid};
+pub use policy::{MapSource, PlannerOptions, PlannerPolicy};

@@ -471,6 +471,7 @@ impl Env {
             self.obs.depth.push_slot(),
         );
         self.obs.goal = self.goal.map(|g| goal_in_robot_frame(pose.x, pose.y, pose.yaw, g.x, g.y));
+        self.obs.pose = Some([pose.x, pose.y, pose.yaw]);
     }
 
     fn contact(&mut self) -> Option<Collision> {
@@ -634,6 +635,7 @@ impl Env {
         self.goal_distance = state.goal_distance;
         let pose = self.robot.pose;
         self.obs.goal = self.goal.map(|g| goal_in_robot_frame(pose.x, pose.y, pose.yaw, g.x, g.y));
+        self.obs.pose = Some([pose.x, pose.y, pose.yaw]);
         Ok(())
     }
 

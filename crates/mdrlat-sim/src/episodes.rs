@@ -15,7 +15,7 @@ use crate::env::{Collision, Env, Observation, SimError};
 use crate::rollout::TrajectoryRow;
 use crate::vec_env::VecEnv;
 use mdrlat_core::{Action, Policy, PolicyError};
-use mdrlat_geom::Pose2;
+use mdrlat_geom::{Pose2, Vec2};
 
 /// One episode to run.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -39,6 +39,10 @@ pub struct EpisodeOutcome {
     pub reward: f32,
     /// The collision that ended it, if one did.
     pub collision: Option<Collision>,
+    /// The navigation task's goal (`None` in obstacle avoidance).
+    pub goal: Option<Vec2>,
+    /// The robot reached the goal (navigation).
+    pub reached_goal: bool,
     /// The environment's time limit ended it (`max_episode_steps`).
     pub truncated: bool,
     /// Distance driven, metres (sum of the straight distances between step poses).
@@ -51,9 +55,13 @@ pub struct EpisodeOutcome {
 }
 
 impl EpisodeOutcome {
-    /// No collision happened (within the steps it ran).
+    /// Obstacle avoidance: no collision happened (within the steps it ran). Navigation:
+    /// the robot reached its goal.
     pub fn success(&self) -> bool {
-        self.collision.is_none()
+        match self.goal {
+            None => self.collision.is_none(),
+            Some(_) => self.reached_goal,
+        }
     }
 }
 
@@ -199,7 +207,8 @@ fn run(
         *r = start(venv, policy, observer, &mut done, slot, &mut next)?;
     }
 
-    let (mut active, mut actions, mut masked) = (Vec::new(), Vec::new(), vec![None; slots]);
+    let (mut active, mut actions, mut commands) = (Vec::new(), Vec::new(), Vec::new());
+    let mut masked = vec![None; slots];
     loop {
         active.clear();
         active.extend(running.iter().enumerate().filter(|(_, r)| r.is_some()).map(|(i, _)| i));
@@ -208,23 +217,23 @@ fn run(
         }
         let decided = venv.with_observations(|obs| {
             let batch: Vec<&Observation> = active.iter().map(|&i| obs[i]).collect();
-            policy.act(&batch, &active, &mut actions)
+            policy.commands(&batch, &active, &mut actions, &mut commands)
         });
         let first_episode = running[active[0]].as_ref().map_or(0, |r| r.episode);
         let policy_error =
             |source| RunError::Policy { policy: policy.name(), episode: first_episode, source };
         decided.map_err(policy_error)?;
-        if actions.len() != active.len() {
+        if actions.len() != active.len() || commands.len() != active.len() {
             return Err(policy_error(PolicyError::Count {
                 expected: active.len(),
-                got: actions.len(),
+                got: actions.len().min(commands.len()),
             }));
         }
         masked.iter_mut().for_each(|m| *m = None);
-        for (&slot, &a) in active.iter().zip(&actions) {
-            masked[slot] = Some(a);
+        for (&slot, &c) in active.iter().zip(&commands) {
+            masked[slot] = Some(c);
         }
-        let stepped = venv.step_masked(&masked)?.to_vec();
+        let stepped = venv.step_masked_commands(&masked)?.to_vec();
         for (&slot, &action) in active.iter().zip(&actions) {
             let Some(s) = stepped[slot] else { continue };
             let Some(r) = running[slot].as_mut() else { continue };
@@ -243,6 +252,7 @@ fn run(
             o.reward += s.reward;
             o.actions.push(action);
             o.collision = s.info.collision;
+            o.reached_goal = s.info.reached_goal;
             o.truncated = s.truncated;
             if options.record_rows {
                 o.rows.push(row);
@@ -279,6 +289,8 @@ fn start_one(
         steps: 0,
         reward: 0.0,
         collision: None,
+        goal: venv.env(slot).goal(),
+        reached_goal: false,
         truncated: false,
         path_m: 0.0,
         actions: Vec::new(),

@@ -13,7 +13,7 @@
 use crate::config::SimConfig;
 use crate::env::{Env, Observation, SimError, StepInfo};
 use crate::scene::StaticScene;
-use mdrlat_core::Action;
+use mdrlat_core::{Action, Velocity};
 use mdrlat_geom::Pose2;
 use std::ops::Deref;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -44,8 +44,9 @@ pub struct VecStep {
 struct Chunk {
     envs: Vec<Env>,
     finals: Vec<Observation>,
-    /// Per environment: the action of the next step (`None`: it sits this step out).
-    actions: Vec<Option<Action>>,
+    /// Per environment: the velocity command of the next step (`None`: it sits this step
+    /// out); an action steps with its Table 1 velocity, exactly as `Env::step` does.
+    commands: Vec<Option<Velocity>>,
     /// Per environment: the last step's outcome (`None`: it was not stepped).
     results: Vec<Result<Option<VecStep>, SimError>>,
     /// A reset request: environment `first + i` takes stream `first + i` of the seed.
@@ -66,13 +67,13 @@ impl Chunk {
         }
         let auto_reset = self.auto_reset;
         let it =
-            self.envs.iter_mut().zip(&mut self.finals).zip(&self.actions).zip(&mut self.results);
-        for (((env, fin), &a), out) in it {
-            let Some(a) = a else {
+            self.envs.iter_mut().zip(&mut self.finals).zip(&self.commands).zip(&mut self.results);
+        for (((env, fin), &c), out) in it {
+            let Some(c) = c else {
                 *out = Ok(None);
                 continue;
             };
-            let stepped = env.step(a).map(|s| VecStep {
+            let stepped = env.step_command(c).map(|s| VecStep {
                 reward: s.reward,
                 terminated: s.terminated,
                 truncated: s.truncated,
@@ -220,7 +221,7 @@ impl VecEnv {
             chunks.push(Arc::new(Mutex::new(Chunk {
                 envs,
                 finals: (0..len).map(|_| Observation::zeros()).collect(),
-                actions: Vec::with_capacity(len),
+                commands: Vec::with_capacity(len),
                 results: (0..len).map(|_| Err(SimError::NeedsReset)).collect(),
                 reset_seed: None,
                 first: bounds[k],
@@ -338,7 +339,7 @@ impl VecEnv {
         if actions.len() != self.len() {
             return Err(SimError::ActionCount { expected: self.len(), got: actions.len() });
         }
-        self.run_actions(actions.iter().map(|&a| Some(a)))?;
+        self.run_commands(actions.iter().map(|&a| Some(a.command())))?;
         self.outcomes.clear();
         for c in &self.chunks {
             for r in &lock(c).results {
@@ -357,10 +358,24 @@ impl VecEnv {
         &mut self,
         actions: &[Option<Action>],
     ) -> Result<&[Option<VecStep>], SimError> {
-        if actions.len() != self.len() {
-            return Err(SimError::ActionCount { expected: self.len(), got: actions.len() });
+        let commands: Vec<Option<Velocity>> =
+            actions.iter().map(|a| a.map(Action::command)).collect();
+        self.step_masked_commands(&commands)
+    }
+
+    /// [`VecEnv::step_masked`] with velocity commands (`Env::step_command`), as a continuous
+    /// controller drives the robot.
+    ///
+    /// # Errors
+    /// Wrong number of commands, or a step of an environment whose episode has ended.
+    pub fn step_masked_commands(
+        &mut self,
+        commands: &[Option<Velocity>],
+    ) -> Result<&[Option<VecStep>], SimError> {
+        if commands.len() != self.len() {
+            return Err(SimError::ActionCount { expected: self.len(), got: commands.len() });
         }
-        self.run_actions(actions.iter().copied())?;
+        self.run_commands(commands.iter().copied())?;
         self.masked.clear();
         self.outcomes.clear();
         for c in &self.chunks {
@@ -371,15 +386,15 @@ impl VecEnv {
         Ok(&self.masked)
     }
 
-    fn run_actions(
+    fn run_commands(
         &mut self,
-        actions: impl Iterator<Item = Option<Action>>,
+        commands: impl Iterator<Item = Option<Velocity>>,
     ) -> Result<(), SimError> {
-        let mut actions = actions;
+        let mut commands = commands;
         for (k, c) in self.chunks.iter().enumerate() {
             let mut c = lock(c);
-            c.actions.clear();
-            c.actions.extend(actions.by_ref().take(self.bounds[k + 1] - self.bounds[k]));
+            c.commands.clear();
+            c.commands.extend(commands.by_ref().take(self.bounds[k + 1] - self.bounds[k]));
         }
         self.run_all()
     }
