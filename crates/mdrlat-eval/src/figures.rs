@@ -169,7 +169,8 @@ pub fn draw_episode(
 ) -> Result<EpisodeFigure, EvalError> {
     let scene = Arc::new(StaticScene::new(Arc::new(world.clone()), sim));
     let mut venv = VecEnv::new(scene, sim.clone(), 1, 1)?;
-    let mut replay = ReplayPolicy::new(vec![record.actions.clone()]);
+    let mut replay =
+        ReplayPolicy::with_commands(vec![record.actions.clone()], vec![record.commands.clone()]);
     let mut capture =
         Capture { at: strip_steps(record.steps), frames: Vec::new(), rows: Vec::new() };
     let spec = EpisodeSpec { seed: Some(record.seed), pose: None };

@@ -129,14 +129,24 @@ pub struct EpisodeRecord {
     pub path_m: f32,
     /// Accumulated reward (paper eq. 3).
     pub ret: f32,
-    /// The actions taken (with the seed they reproduce the episode, for figures).
+    /// The actions taken (a continuous controller's: the nearest Table 1 ones).
     pub actions: Vec<Action>,
+    /// The velocity commands (with the seed they reproduce the episode, for figures).
+    pub commands: Vec<Velocity>,
+    /// The navigation task's goal (`None`: obstacle avoidance).
+    pub goal: Option<mdrlat_geom::Vec2>,
+    /// The robot reached its goal (navigation).
+    pub reached_goal: bool,
 }
 
 impl EpisodeRecord {
-    /// No collision within the step budget.
+    /// Obstacle avoidance: no collision within the step budget. Navigation: the goal
+    /// reached.
     pub fn success(&self) -> bool {
-        self.collision.is_none()
+        match self.goal {
+            None => self.collision.is_none(),
+            Some(_) => self.reached_goal,
+        }
     }
 }
 
@@ -308,6 +318,9 @@ pub fn evaluate_world(
             path_m: o.path_m,
             ret: o.reward,
             actions: o.actions,
+            commands: o.commands,
+            goal: o.goal,
+            reached_goal: o.reached_goal,
         })
         .collect();
     Ok(WorldEval {

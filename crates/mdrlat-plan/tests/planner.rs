@@ -42,3 +42,30 @@ fn the_planner_reaches_the_goals_of_the_unseen_world_and_only_low_obstacles_stop
     // The same seeds, the same episodes.
     assert_eq!(episodes(MapSource::LaserPlane, 4), laser[..4].to_vec());
 }
+
+#[test]
+fn a_planner_episode_replays_exactly_from_its_velocity_commands() {
+    let world = mdrlat_world::load("nav-test").expect("nav-test");
+    let config = SimConfig { task: Task::Nav, ..SimConfig::default() };
+    let scene = Arc::new(StaticScene::new(Arc::new(world), &config));
+    let original = episodes(MapSource::LaserPlane, 3);
+    let mut venv = VecEnv::new(scene, config, 1, 1).expect("env");
+    for (seed, o) in original.iter().enumerate() {
+        assert!(o.commands.iter().any(|c| !mdrlat_core::TABLE_1.contains(c)), "continuous");
+        let mut replay = mdrlat_sim::ReplayPolicy::with_commands(
+            vec![o.actions.clone()],
+            vec![o.commands.clone()],
+        );
+        let spec = EpisodeSpec { seed: Some(seed as u64), pose: None };
+        let options = RunOptions { max_steps: o.steps, record_rows: false };
+        let again = run_episodes(&mut venv, &mut replay, &[spec], &options, &mut Quiet)
+            .expect("replay")
+            .pop()
+            .expect("one episode");
+        assert_eq!(
+            (again.steps, again.collision, again.reached_goal),
+            (o.steps, o.collision, o.reached_goal)
+        );
+        assert_eq!(again.path_m, o.path_m);
+    }
+}

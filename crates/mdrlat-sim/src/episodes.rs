@@ -14,7 +14,7 @@
 use crate::env::{Collision, Env, Observation, SimError};
 use crate::rollout::TrajectoryRow;
 use crate::vec_env::VecEnv;
-use mdrlat_core::{Action, Policy, PolicyError};
+use mdrlat_core::{Action, Policy, PolicyError, Velocity};
 use mdrlat_geom::{Pose2, Vec2};
 
 /// One episode to run.
@@ -47,9 +47,11 @@ pub struct EpisodeOutcome {
     pub truncated: bool,
     /// Distance driven, metres (sum of the straight distances between step poses).
     pub path_m: f32,
-    /// Every action taken, in order: with the episode's seed they reproduce it exactly
-    /// ([`crate::ReplayPolicy`]).
+    /// Every action taken, in order (a continuous controller's: the nearest Table 1 ones).
     pub actions: Vec<Action>,
+    /// Every velocity command, in order: with the episode's seed they reproduce it exactly
+    /// ([`crate::ReplayPolicy`]).
+    pub commands: Vec<Velocity>,
     /// Every step, when [`RunOptions::record_rows`] asked for them.
     pub rows: Vec<TrajectoryRow>,
 }
@@ -234,7 +236,7 @@ fn run(
             masked[slot] = Some(c);
         }
         let stepped = venv.step_masked_commands(&masked)?.to_vec();
-        for (&slot, &action) in active.iter().zip(&actions) {
+        for ((&slot, &action), &command) in active.iter().zip(&actions).zip(&commands) {
             let Some(s) = stepped[slot] else { continue };
             let Some(r) = running[slot].as_mut() else { continue };
             r.path_m += f64::from((s.info.pose.position() - r.last.position()).length());
@@ -251,6 +253,7 @@ fn run(
             o.steps += 1;
             o.reward += s.reward;
             o.actions.push(action);
+            o.commands.push(command);
             o.collision = s.info.collision;
             o.reached_goal = s.info.reached_goal;
             o.truncated = s.truncated;
@@ -294,6 +297,7 @@ fn start_one(
         truncated: false,
         path_m: 0.0,
         actions: Vec::new(),
+        commands: Vec::new(),
         rows: Vec::new(),
     };
     Ok(Running { episode, outcome, last: pose, path_m: 0.0 })

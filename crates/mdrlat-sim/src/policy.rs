@@ -4,7 +4,7 @@
 use crate::config::SimConfig;
 use crate::env::Observation;
 use crate::sensors::{DepthCamera, DepthGeometry, Laser};
-use mdrlat_core::{Action, Policy, PolicyError, Rng, Sensors, TABLE_1, check_batch};
+use mdrlat_core::{Action, Policy, PolicyError, Rng, Sensors, TABLE_1, Velocity, check_batch};
 
 /// The scripted policies by name (`mdrlat rollout --policy`, `mdrlat eval --policy`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -149,20 +149,29 @@ impl Policy for ConstantPolicy {
     }
 }
 
-/// Replays recorded actions, one list per slot: with the same episode seed an environment
-/// is a function of its actions, so this reproduces an episode exactly (for pictures of an
-/// episode run in a batch). Past the end of its list a slot repeats its last action.
+/// Replays recorded actions (and velocity commands), one list per slot: with the same
+/// episode seed an environment is a function of its commands, so this reproduces an
+/// episode exactly (for pictures of an episode run in a batch). Past the end of its list a
+/// slot repeats its last step.
 #[derive(Debug, Clone, Default)]
 pub struct ReplayPolicy {
     actions: Vec<Vec<Action>>,
+    commands: Vec<Vec<Velocity>>,
     at: Vec<usize>,
 }
 
 impl ReplayPolicy {
-    /// Slot `i` plays `actions[i]`.
+    /// Slot `i` plays `actions[i]` (at their Table 1 velocities).
     pub fn new(actions: Vec<Vec<Action>>) -> Self {
+        let commands = actions.iter().map(|l| l.iter().map(|a| a.command()).collect()).collect();
+        Self::with_commands(actions, commands)
+    }
+
+    /// Slot `i` plays `actions[i]` as the velocities `commands[i]` (a continuous
+    /// controller's episode: its actions are only the nearest Table 1 ones).
+    pub fn with_commands(actions: Vec<Vec<Action>>, commands: Vec<Vec<Velocity>>) -> Self {
         let at = vec![0; actions.len()];
-        Self { actions, at }
+        Self { actions, commands, at }
     }
 }
 
@@ -184,14 +193,35 @@ impl Policy for ReplayPolicy {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
+        let mut commands = Vec::new();
+        self.commands(batch, slots, out, &mut commands)
+    }
+
+    fn commands(
+        &mut self,
+        batch: &[&Observation],
+        slots: &[usize],
+        actions: &mut Vec<Action>,
+        commands: &mut Vec<Velocity>,
+    ) -> Result<(), PolicyError> {
         check_batch(batch, slots)?;
-        out.clear();
+        actions.clear();
+        commands.clear();
         for &slot in slots {
-            let list = self.actions.get(slot).filter(|l| !l.is_empty()).ok_or_else(|| {
-                PolicyError::Backend(format!("no recorded actions for slot {slot}"))
-            })?;
+            let (Some(list), Some(vels)) = (self.actions.get(slot), self.commands.get(slot)) else {
+                return Err(PolicyError::Backend(format!("no recorded actions for slot {slot}")));
+            };
+            if list.is_empty() || vels.len() != list.len() {
+                return Err(PolicyError::Backend(format!(
+                    "slot {slot}: {} recorded actions and {} commands",
+                    list.len(),
+                    vels.len()
+                )));
+            }
             let at = &mut self.at[slot];
-            out.push(list[(*at).min(list.len() - 1)]);
+            let i = (*at).min(list.len() - 1);
+            actions.push(list[i]);
+            commands.push(vels[i]);
             *at += 1;
         }
         Ok(())
