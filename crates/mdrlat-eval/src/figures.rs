@@ -265,6 +265,8 @@ pub fn draw_episode(
         300,
     );
     let ending = match &record.collision {
+        None if record.reached_goal => format!("goal reached in {} steps", record.steps),
+        None if record.goal.is_some() => format!("goal not reached in {} steps", record.steps),
         None => format!("no collision in {} steps", record.steps),
         Some(c) => format!("{} collision at step {}", collision_kind(c), record.steps),
     };

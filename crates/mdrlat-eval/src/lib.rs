@@ -6,6 +6,8 @@
 //!   run repeated 5 times; all environments of a run step together and the policy decides
 //!   for all of them in one batch ([`mdrlat_sim::run_episodes`]).
 //! - [`report`]: `episodes.csv`, `summary.csv`, `summary.md` and JSON, byte-reproducible.
+//! - [`nav`]: the navigation task's measures (time to goal, path against the shortest
+//!   collision-free path) and `navigation.csv`/`navigation.md`.
 //! - [`figures`]: paper Figs. 6/7 — six top views with their commands and the
 //!   angular-velocity trace — by replaying an episode's recorded actions.
 //!
@@ -14,10 +16,12 @@
 //! stack, so the baselines evaluate without it).
 
 pub mod figures;
+pub mod nav;
 pub mod protocol;
 pub mod report;
 
 pub use figures::{EpisodeFigure, Pick, draw_episode, pick_episodes};
+pub use nav::{NavRecord, NavSummary, nav_records, navigation_csv, navigation_markdown};
 pub use protocol::{
     EpisodeRecord, EvalSettings, Progress, WorldEval, collision_kind, episode_seed,
     eval_sim_config, evaluate_world, world_episodes,
@@ -55,6 +59,9 @@ pub enum EvalError {
         /// What went wrong.
         source: mdrlat_core::PolicyError,
     },
+    /// A navigation measure cannot be taken (no goal, a goal unreachable on the grid).
+    #[error("{0}")]
+    Nav(String),
     /// Replaying an episode for a figure did not reproduce it.
     #[error("replaying an episode for its figure: {0}")]
     Replay(String),

@@ -76,6 +76,10 @@ pub struct WorldSummary {
     pub path_m_mean: f64,
     /// Mean accumulated reward.
     pub return_mean: f64,
+    /// The episodes were of the navigation task (success = the goal reached); not in
+    /// `summary.csv` (`navigation.csv` has the rest), in the JSON only when true.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub navigation: bool,
 }
 
 /// Rounds to `digits` decimals, so that the JSON and CSV outputs agree.
@@ -122,6 +126,7 @@ impl WorldSummary {
             steps_mean: round(avg(|r| f64::from(r.steps)), 3),
             path_m_mean: round(avg(|r| f64::from(r.path_m)), 3),
             return_mean: round(avg(|r| f64::from(r.ret)), 4),
+            navigation: w.records.iter().any(|r| r.goal.is_some()),
         }
     }
 
@@ -284,6 +289,7 @@ pub fn parse_summary_csv(text: &str, source: &str) -> Result<Vec<WorldSummary>, 
             steps_mean: num(12, "steps_mean")?,
             path_m_mean: num(13, "path_m_mean")?,
             return_mean: num(14, "return_mean")?,
+            navigation: false,
         });
     }
     Ok(rows)
@@ -296,9 +302,14 @@ pub fn summary_markdown(rows: &[WorldSummary]) -> String {
     let several = rows.iter().any(|r| r.eval != rows[0].eval);
     if let Some(first) = rows.first() {
         let title = if several { String::new() } else { format!(" of {}", first.eval) };
+        let what = if first.navigation {
+            "the goal reached (navigation.md has time and path)"
+        } else {
+            "no collision"
+        };
         let _ = writeln!(
             s,
-            "# Evaluation{title}\n\nSuccess = no collision within {} steps; {} episodes per run, {} runs \
+            "# Evaluation{title}\n\nSuccess = {what} within {} steps; {} episodes per run, {} runs \
              per world (mean ± population std over runs), seed {}.\n",
             first.max_steps, first.episodes, first.runs, first.seed
         );
@@ -364,6 +375,7 @@ mod tests {
             steps_mean: 100.0,
             path_m_mean: 5.0,
             return_mean: 10.0,
+            navigation: false,
         }
     }
 

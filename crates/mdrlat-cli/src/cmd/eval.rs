@@ -3,22 +3,47 @@
 
 use super::rollout::parse_scripted;
 use super::train::DeviceKind;
-use super::{ensure_dir, load_world};
+use super::{TaskArgs, ensure_dir, load_world};
 use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result, bail};
 use mdrlat_core::Policy;
 use mdrlat_eval::{
-    EvalSettings, Timing, WorldEval, WorldSummary, draw_episode, episodes_csv, eval_sim_config,
-    evaluate_world, pick_episodes, summary_csv, summary_markdown,
+    EvalSettings, NavSummary, Timing, WorldEval, WorldSummary, draw_episode, episodes_csv,
+    eval_sim_config, evaluate_world, nav_records, navigation_csv, navigation_markdown,
+    pick_episodes, summary_csv, summary_markdown,
 };
 use mdrlat_nn::QNetConfig;
+use mdrlat_plan::{MapSource, PlannerOptions, PlannerPolicy};
 use mdrlat_sim::Scripted;
+use mdrlat_sim::config::Task;
 use mdrlat_train::GreedyPolicy;
 use std::path::{Path, PathBuf};
 
 /// The paper's three unseen test worlds (Fig. 5).
 const TEST_WORLDS: [&str; 3] = ["office", "furnished", "crowd"];
+
+/// The navigation extension's unseen test world (Fig. 8 right).
+const NAV_TEST_WORLDS: [&str; 1] = ["nav-test"];
+
+/// `--policy`: a scripted baseline or the classical planner.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PolicyArg {
+    /// A scripted policy of the simulator.
+    Scripted(Scripted),
+    /// The classical planner (A* + DWA) with this map.
+    Planner(MapSource),
+}
+
+fn parse_policy(s: &str) -> Result<PolicyArg, String> {
+    match s {
+        "planner" => Ok(PolicyArg::Planner(MapSource::LaserPlane)),
+        "planner-body" => Ok(PolicyArg::Planner(MapSource::Body)),
+        _ => parse_scripted(s)
+            .map(PolicyArg::Scripted)
+            .map_err(|e| format!("{e}; navigation: planner, planner-body")),
+    }
+}
 
 /// Arguments of `mdrlat eval`.
 #[derive(Debug, clap::Args)]
@@ -27,14 +52,20 @@ pub struct Args {
     /// A run directory of `mdrlat train` (or its checkpoint folder): its network acts greedily.
     #[arg(long, value_name = "RUN_DIR", conflicts_with = "policy")]
     checkpoint: Option<PathBuf>,
-    /// A scripted policy instead: random, forward, wander or wander-laser (`wander` is the
-    /// non-learned baseline row beside the six methods).
-    #[arg(long, value_parser = parse_scripted)]
-    policy: Option<Scripted>,
+    /// A policy that needs no training instead: random, forward, wander or wander-laser
+    /// (`wander` is the non-learned baseline row beside the six methods); with `--task nav`,
+    /// `planner` (the paper's move_base: A* on a laser-plane map of the world + DWA) or
+    /// `planner-body` (its map holds everything the body can hit).
+    #[arg(long, value_parser = parse_policy)]
+    policy: Option<PolicyArg>,
     /// World to evaluate in (repeatable): a built-in name, a .toml world file or a
-    /// map_server .yaml (default: the paper's test worlds office, furnished and crowd).
+    /// map_server .yaml (default: the paper's test worlds office, furnished and crowd;
+    /// with `--task nav`, nav-test).
     #[arg(long = "world", value_name = "W")]
     worlds: Vec<String>,
+    /// The task, and a fixed start and goal for navigation.
+    #[command(flatten)]
+    task: TaskArgs,
     /// Episodes per run (the paper's 50).
     #[arg(long, default_value_t = 50, allow_negative_numbers = true)]
     episodes: u32,
@@ -138,9 +169,13 @@ pub fn run(a: &Args) -> Result<()> {
     if a.forward_batch == 0 || a.forward_batch > 4096 {
         bail!("--forward-batch {}: must be 1 to 4096", a.forward_batch);
     }
-    let config = Config::load_or_default(a.config.as_deref())?;
+    let mut config = Config::load_or_default(a.config.as_deref())?;
+    a.task.apply(&mut config.sim)?;
+    config.sim.validate()?;
+    let nav = config.sim.task == Task::Nav;
     let names: Vec<String> = if a.worlds.is_empty() {
-        TEST_WORLDS.iter().map(|s| s.to_string()).collect()
+        let default: &[&str] = if nav { &NAV_TEST_WORLDS } else { &TEST_WORLDS };
+        default.iter().map(|s| s.to_string()).collect()
     } else {
         a.worlds.clone()
     };
@@ -148,7 +183,11 @@ pub fn run(a: &Args) -> Result<()> {
         .iter()
         .map(|w| load_world(w).with_context(|| format!("--world {w}")))
         .collect::<Result<Vec<_>>>()?;
-    let (mut policy, flop_per_decision): (Box<dyn Policy>, Option<f64>) =
+    if matches!(a.policy, Some(PolicyArg::Planner(_))) && !nav {
+        bail!("--policy planner drives to a goal: add --task nav");
+    }
+    // The planner's map is its world's: it is made per world below.
+    let (mut policy, flop_per_decision): (Option<Box<dyn Policy>>, Option<f64>) =
         match (&a.checkpoint, a.policy) {
             (Some(run), None) => {
                 let device = a.device.device();
@@ -161,20 +200,52 @@ pub fn run(a: &Args) -> Result<()> {
                 } else {
                     p
                 };
+                if nav {
+                    bail!(
+                        "--checkpoint {}: a {} network of the obstacle-avoidance task (no goal \
+                         input); --task nav needs a network trained with --task nav",
+                        run.display(),
+                        p.variant()
+                    );
+                }
                 let flops = QNetConfig::new(p.variant()).decision_flops() as f64;
-                (Box::new(p), Some(flops))
+                (Some(Box::new(p)), Some(flops))
             }
-            (None, Some(s)) => (s.build(&config.sim, a.seed), None),
+            (None, Some(PolicyArg::Scripted(s))) => (Some(s.build(&config.sim, a.seed)), None),
+            (None, Some(PolicyArg::Planner(_))) => (None, None),
             _ => bail!("give exactly one of --checkpoint RUN_DIR and --policy NAME"),
         };
+    let planner = |world: &mdrlat_world::World| -> Result<Box<dyn Policy>> {
+        let map = match a.policy {
+            Some(PolicyArg::Planner(m)) => m,
+            _ => MapSource::LaserPlane,
+        };
+        let options = PlannerOptions { map, ..PlannerOptions::default() };
+        let p = PlannerPolicy::new(world, &config.sim, &options).map_err(anyhow::Error::msg)?;
+        Ok(Box::new(p))
+    };
     check_out(&a.out, a.overwrite)?;
-    let name = policy.name();
 
     let total = (settings.episodes_per_world() * worlds.len()) as u64;
     let pb = progress::bar(total, "eval");
     let mut evals: Vec<WorldEval> = Vec::new();
     let mut summaries = Vec::new();
+    let mut navigation = Vec::new();
+    let mut names_seen = Vec::new();
     for world in &worlds {
+        let mut per_world;
+        let policy: &mut dyn Policy = match policy.as_mut() {
+            Some(p) => p.as_mut(),
+            None => {
+                per_world =
+                    planner(world).with_context(|| format!("planner for '{}'", world.name))?;
+                per_world.as_mut()
+            }
+        };
+        let name = policy.name();
+        if !names_seen.contains(&name) {
+            names_seen.push(name.clone());
+        }
         let base = pb.position();
         let mut on_progress = |p: &mdrlat_eval::Progress<'_>| {
             pb.set_position(base + p.done as u64);
@@ -184,8 +255,27 @@ pub fn run(a: &Args) -> Result<()> {
                 100.0 * p.successes as f64 / p.done.max(1) as f64
             ));
         };
-        let e = evaluate_world(world, &config.sim, policy.as_mut(), &settings, &mut on_progress)
+        let e = evaluate_world(world, &config.sim, policy, &settings, &mut on_progress)
             .with_context(|| format!("evaluating {name} in '{}'", world.name))?;
+        if nav {
+            let sim = eval_sim_config(&config.sim, &settings);
+            let records = nav_records(world, &sim, &e)?;
+            let n = NavSummary::new(&name, &e, &records);
+            pb.suspend(|| {
+                out!(
+                    "{:<10} reached {}/{} goals ({} collisions, {} timeouts); mean {} s, path {} m, {} x the shortest",
+                    n.world,
+                    n.reached,
+                    n.episodes,
+                    n.collisions,
+                    n.timeouts,
+                    n.time_s_mean.map_or("—".into(), |x| format!("{x:.1}")),
+                    n.path_m_mean.map_or("—".into(), |x| format!("{x:.2}")),
+                    n.path_ratio_mean.map_or("—".into(), |x| format!("{x:.2}"))
+                )
+            });
+            navigation.push((n, records));
+        }
         let summary = WorldSummary::new(&name, &e, &settings);
         let timing = Timing::of(&e, flop_per_decision);
         pb.suspend(|| {
@@ -221,6 +311,15 @@ pub fn run(a: &Args) -> Result<()> {
     write(&a.out.join("summary.csv"), &summary_csv(&summaries))?;
     write(&a.out.join("summary.md"), &summary_markdown(&summaries))?;
     let mut written = vec!["episodes.csv", "summary.csv", "summary.md"];
+    if nav {
+        let rows: Vec<(&WorldEval, Vec<mdrlat_eval::NavRecord>)> =
+            evals.iter().zip(&navigation).map(|(e, (_, r))| (e, r.clone())).collect();
+        write(&a.out.join("navigation.csv"), &navigation_csv(&rows))?;
+        let sums: Vec<NavSummary> = navigation.iter().map(|(n, _)| n.clone()).collect();
+        let sim = eval_sim_config(&config.sim, &settings);
+        write(&a.out.join("navigation.md"), &navigation_markdown(&sums, settings.max_steps, &sim))?;
+        written.extend(["navigation.csv", "navigation.md"]);
+    }
 
     let dir = a.out.join("figures");
     if a.figures > 0 {
@@ -237,7 +336,7 @@ pub fn run(a: &Args) -> Result<()> {
         written.push("figures/");
     }
     if !a.json {
-        out!("{name}: wrote {} in {}", written.join(", "), a.out.display());
+        out!("{}: wrote {} in {}", names_seen.join(", "), written.join(", "), a.out.display());
     }
     Ok(())
 }

@@ -19,6 +19,7 @@ use anyhow::{Context, Result, bail};
 use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS};
 use mdrlat_geom::{Pose2, Vec2};
 use mdrlat_render::{Image, LaserRays, RobotMark, Scene, depth_view, side_by_side, top_view};
+use mdrlat_sim::config::Task;
 use mdrlat_sim::{Env, SimConfig};
 use mdrlat_world::World;
 use std::path::Path;
@@ -33,21 +34,70 @@ pub fn make_env(world: World, config: &SimConfig) -> Result<Env> {
     Ok(Env::from_world(world, config.clone())?)
 }
 
+/// Parses `n` comma-separated finite numbers given to `flag` (`expected` names them).
+pub fn parse_numbers(flag: &str, s: &str, n: usize, expected: &str) -> Result<Vec<f32>> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != n {
+        bail!("{flag} '{s}': expected {expected} ({n} comma-separated numbers)");
+    }
+    parts
+        .iter()
+        .map(|p| {
+            p.parse::<f32>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .with_context(|| format!("{flag} '{s}': '{p}' is not a finite number"))
+        })
+        .collect()
+}
+
 /// Parses `X,Y,YAW_DEG` (metres, metres, degrees).
 pub fn parse_pose(s: &str) -> Result<Pose2> {
-    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
-    if parts.len() != 3 {
-        bail!("--pose '{s}': expected X,Y,YAW_DEG (three comma-separated numbers)");
-    }
-    let mut v = [0f32; 3];
-    for (slot, p) in v.iter_mut().zip(&parts) {
-        *slot = p
-            .parse::<f32>()
-            .ok()
-            .filter(|x| x.is_finite())
-            .with_context(|| format!("--pose '{s}': '{p}' is not a finite number"))?;
-    }
+    let v = parse_numbers("--pose", s, 3, "X,Y,YAW_DEG")?;
     Ok(Pose2::new(v[0], v[1], v[2].to_radians()))
+}
+
+/// The task flags of the commands that run episodes.
+#[derive(Debug, Clone, clap::Args)]
+pub struct TaskArgs {
+    /// The task: `avoid` (the paper's obstacle avoidance; the default) or `nav` (reach a
+    /// goal in the world's goal regions: the paper's navigation extension).
+    #[arg(long, value_parser = parse_task)]
+    pub task: Option<Task>,
+    /// Navigation: start every episode here instead of a drawn start.
+    #[arg(long, value_name = "X,Y,YAW_DEG")]
+    pub start: Option<String>,
+    /// Navigation: this goal for every episode instead of a drawn one.
+    #[arg(long, value_name = "X,Y")]
+    pub goal: Option<String>,
+}
+
+fn parse_task(s: &str) -> Result<Task, String> {
+    s.parse()
+}
+
+impl TaskArgs {
+    /// Applies the flags to `sim` (a config file's `task` stays unless `--task` is given).
+    ///
+    /// # Errors
+    /// `--start`/`--goal` without the navigation task, or not numbers.
+    pub fn apply(&self, sim: &mut SimConfig) -> Result<()> {
+        if let Some(t) = self.task {
+            sim.task = t;
+        }
+        if (self.start.is_some() || self.goal.is_some()) && sim.task != Task::Nav {
+            bail!("--start and --goal fix a navigation episode: add --task nav");
+        }
+        if let Some(s) = &self.start {
+            let v = parse_numbers("--start", s, 3, "X,Y,YAW_DEG")?;
+            sim.nav.start = Some([v[0], v[1], v[2]]);
+        }
+        if let Some(g) = &self.goal {
+            let v = parse_numbers("--goal", g, 2, "X,Y")?;
+            sim.nav.goal = Some([v[0], v[1]]);
+        }
+        Ok(())
+    }
 }
 
 /// A scale that makes the longer side of the world about `target_px` pixels.
