@@ -35,6 +35,9 @@ pub struct DwaConfig {
     pub radius_m: f32,
     /// Clearance a moving trajectory must keep from every laser point, beyond the radius.
     pub margin_m: f32,
+    /// Laser points closer together than this are thinned to one (the nearest), metres
+    /// (0: every point).
+    pub obstacle_cell_m: f32,
     /// How far ahead each velocity is rolled out, seconds.
     pub horizon_s: f32,
     /// Time between the rolled-out points, seconds.
@@ -69,11 +72,12 @@ impl Default for DwaConfig {
         Self {
             radius_m: mdrlat_core::robot::RADIUS_M,
             margin_m: 0.02,
+            obstacle_cell_m: 0.02,
             horizon_s: 1.6,
-            step_s: 0.1,
+            step_s: 0.2,
             control_dt_s: 0.2,
             v_samples: 6,
-            w_samples: 21,
+            w_samples: 11,
             lookahead_m: 0.8,
             path_weight: 3.0,
             target_weight: 1.0,
@@ -123,8 +127,8 @@ impl Dwa {
         let (target, ahead) = lookahead(&local, c.lookahead_m);
         // Only the points a roll-out can reach matter.
         let reach = l.v_max * c.horizon_s + c.radius_m + c.margin_m + c.clearance_cap_m;
-        let near: Vec<Vec2> =
-            obstacles.iter().copied().filter(|o| o.is_finite() && o.length() <= reach).collect();
+        let mut near = thin(obstacles, reach, c.obstacle_cell_m);
+        near.sort_by(|a, b| a.length_sq().total_cmp(&b.length_sq()));
         // Slow enough to stop at the goal.
         let v_goal =
             (2.0 * l.accel_v * (goal_local.length() - c.goal_tolerance_m * 0.5).max(0.0)).sqrt();
@@ -135,7 +139,11 @@ impl Dwa {
         let mut best: Option<(f32, Velocity)> = None;
         for v in samples(v_lo, v_hi.max(v_lo), c.v_samples) {
             for w in samples(w_lo, w_hi, c.w_samples) {
-                let Some(score) = self.score(v, w, &near, &local[ahead..], target) else {
+                // Points beyond the roll-out's reach plus the capped clearance cannot change
+                // its score.
+                let r = v * c.horizon_s + c.radius_m + c.clearance_cap_m + c.margin_m;
+                let k = near.partition_point(|o| o.length_sq() <= r * r);
+                let Some(score) = self.score(v, w, &near[..k], &local[ahead..], target) else {
                     continue;
                 };
                 if best.is_none_or(|(b, _)| score > b) {
@@ -159,18 +167,22 @@ impl Dwa {
     ) -> Option<f32> {
         let c = &self.config;
         let steps = (c.horizon_s / c.step_s).ceil().max(1.0) as usize;
-        let mut clearance = f32::INFINITY;
+        // Squared distances in the inner loop; a moving roll-out stops at its first point
+        // too close (it is discarded whatever its score).
+        let too_close = (c.radius_m + c.margin_m).powi(2);
+        let mut nearest_sq = f32::INFINITY;
         let mut end = Pose2::default();
         for k in 1..=steps {
             end = arc(v, w, k as f32 * c.step_s);
             let p = end.position();
             for o in obstacles {
-                clearance = clearance.min((*o - p).length() - c.radius_m);
+                nearest_sq = nearest_sq.min((*o - p).length_sq());
+            }
+            if v > 0.0 && nearest_sq < too_close {
+                return None;
             }
         }
-        if v > 0.0 && clearance < c.margin_m {
-            return None;
-        }
+        let clearance = nearest_sq.sqrt() - c.radius_m;
         let p = end.position();
         let to_target = target - p;
         let heading = if to_target.length() > 1e-3 {
@@ -186,6 +198,26 @@ impl Dwa {
                 + c.speed_weight * v,
         )
     }
+}
+
+/// The points within `reach` of the robot, one per `cell` square (the one nearest the
+/// robot): a 512-beam scan puts neighbouring hits a centimetre apart, and the roll-outs'
+/// cost grows with the points.
+fn thin(points: &[Vec2], reach: f32, cell: f32) -> Vec<Vec2> {
+    let mut near: Vec<(i32, i32, f32, Vec2)> = points
+        .iter()
+        .filter(|o| o.is_finite() && o.length_sq() <= reach * reach)
+        .map(|&o| {
+            let key = |x: f32| if cell > 0.0 { (x / cell).floor() as i32 } else { 0 };
+            (key(o.x), key(o.y), o.length_sq(), o)
+        })
+        .collect();
+    if cell <= 0.0 {
+        return near.into_iter().map(|n| n.3).collect();
+    }
+    near.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)).then(a.2.total_cmp(&b.2)));
+    near.dedup_by(|later, first| (later.0, later.1) == (first.0, first.1));
+    near.into_iter().map(|n| n.3).collect()
 }
 
 /// `n` evenly spaced values from `lo` to `hi` (one value if they are equal or `n` < 2).

@@ -68,7 +68,8 @@ struct Slot {
 pub struct PlannerPolicy {
     map: CostMap,
     dwa: Dwa,
-    beam_angles: Vec<f32>,
+    /// `(cos, sin)` of each laser beam's angle.
+    beams: Vec<(f32, f32)>,
     max_range_m: f32,
     replan_distance_m: f32,
     slots: Vec<Slot>,
@@ -109,7 +110,7 @@ impl PlannerPolicy {
         Ok(Self {
             map,
             dwa: Dwa::new(dwa_config, limits),
-            beam_angles: Laser::new(&config.laser).angles().to_vec(),
+            beams: Laser::new(&config.laser).angles().iter().map(|a| (a.cos(), a.sin())).collect(),
             max_range_m: config.laser.max_range_m,
             replan_distance_m: options.replan_distance_m,
             slots: Vec::new(),
@@ -132,9 +133,9 @@ impl PlannerPolicy {
         let ranges = obs.laser.latest();
         ranges
             .iter()
-            .zip(&self.beam_angles)
+            .zip(&self.beams)
             .filter(|&(&r, _)| r.is_finite() && r < self.max_range_m * 0.999)
-            .map(|(&r, &a)| Vec2::new(r * a.cos(), r * a.sin()))
+            .map(|(&r, &(c, s))| Vec2::new(r * c, r * s))
             .collect()
     }
 
@@ -179,7 +180,7 @@ impl PlannerPolicy {
 
 /// The shortest distance from `p` to any of `points`.
 fn distance_to_points(p: Vec2, points: &[Vec2]) -> f32 {
-    points.iter().map(|&q| (q - p).length()).fold(f32::INFINITY, f32::min)
+    points.iter().map(|&q| (q - p).length_sq()).fold(f32::INFINITY, f32::min).sqrt()
 }
 
 /// The Table 1 action nearest a velocity (each component scaled by its largest value).
