@@ -2,7 +2,9 @@
 //! captioned with that step's (v, ω) command, the angular-velocity command of every step
 //! below it, and a top view of the whole trajectory.
 //!
-//! An episode is redrawn by replaying its recorded actions from its seed in a fresh
+//! Paper Fig. 9 ([`draw_navigation`]): several navigation episodes' trajectories on one map.
+//!
+//! An episode is redrawn by replaying its recorded commands from its seed in a fresh
 //! environment — the simulator is a function of (seed, actions), so the replay is the
 //! episode, pedestrians and all; a replay that ends differently is an error, not a picture.
 
@@ -156,23 +158,22 @@ fn captioned(img: &Image, text: &str) -> Image {
     out
 }
 
-/// Draws `record` (an episode of `world` evaluated with `sim`, the evaluation's settings:
-/// see [`crate::eval_sim_config`]), explaining why it was picked.
+/// Replays `record` from its seed and commands, keeping the environment at the steps `at`
+/// and every step's row.
 ///
 /// # Errors
-/// The replay did not end as the recorded episode did (the simulator or settings changed).
-pub fn draw_episode(
+/// The replay did not end as the recorded episode did.
+fn replay(
     world: &World,
     sim: &SimConfig,
     record: &EpisodeRecord,
-    why: Pick,
-) -> Result<EpisodeFigure, EvalError> {
+    at: Vec<u32>,
+) -> Result<Capture, EvalError> {
     let scene = Arc::new(StaticScene::new(Arc::new(world.clone()), sim));
     let mut venv = VecEnv::new(scene, sim.clone(), 1, 1)?;
     let mut replay =
         ReplayPolicy::with_commands(vec![record.actions.clone()], vec![record.commands.clone()]);
-    let mut capture =
-        Capture { at: strip_steps(record.steps), frames: Vec::new(), rows: Vec::new() };
+    let mut capture = Capture { at, frames: Vec::new(), rows: Vec::new() };
     let spec = EpisodeSpec { seed: Some(record.seed), pose: None };
     let options = RunOptions { max_steps: record.steps, record_rows: false };
     let outcome = run_episodes(&mut venv, &mut replay, &[spec], &options, &mut capture)?
@@ -191,6 +192,58 @@ pub fn draw_episode(
             outcome.collision
         )));
     }
+    Ok(capture)
+}
+
+/// Paper Fig. 9: the trajectories of several navigation episodes of one method on one top
+/// view of `world`, each start ringed and each goal marked, captioned with how many reached
+/// their goal. Every episode is replayed from its record.
+///
+/// # Errors
+/// A replay did not end as its record did.
+pub fn draw_navigation(
+    world: &World,
+    sim: &SimConfig,
+    records: &[&EpisodeRecord],
+    method: &str,
+) -> Result<Image, EvalError> {
+    let (mut trail, mut goals) = (Vec::new(), Vec::new());
+    for r in records {
+        let capture = replay(world, sim, r, Vec::new())?;
+        trail.push(r.start.position());
+        trail.extend(capture.rows.iter().map(|row| row.info.pose.position()));
+        trail.push(Vec2::new(f32::NAN, f32::NAN));
+        goals.extend(r.goal);
+    }
+    let reached = records.iter().filter(|r| r.reached_goal).count();
+    let collided = records.iter().filter(|r| r.collision.is_some()).count();
+    let caption = format!(
+        "{method} in {}: {reached} of {} goals reached, {collided} collisions, {} out of time \
+         (rings: starts; squares: goals)",
+        world.name,
+        records.len(),
+        records.len() - reached - collided
+    );
+    let scene =
+        Scene { trail: &trail, goals: &goals, caption: Some(&caption), ..Scene::new(world) };
+    Ok(top_view(
+        &scene,
+        (640.0 / world.bounds.size().x.max(world.bounds.size().y)).clamp(4.0, 120.0),
+    ))
+}
+
+/// Draws `record` (an episode of `world` evaluated with `sim`, the evaluation's settings:
+/// see [`crate::eval_sim_config`]), explaining why it was picked.
+///
+/// # Errors
+/// The replay did not end as the recorded episode did (the simulator or settings changed).
+pub fn draw_episode(
+    world: &World,
+    sim: &SimConfig,
+    record: &EpisodeRecord,
+    why: Pick,
+) -> Result<EpisodeFigure, EvalError> {
+    let capture = replay(world, sim, record, strip_steps(record.steps))?;
     let trail: Vec<Vec2> = std::iter::once(record.start.position())
         .chain(capture.rows.iter().map(|r| r.info.pose.position()))
         .collect();
@@ -228,6 +281,7 @@ pub fn draw_episode(
                 }),
                 pedestrians: &peds,
                 trail: &trail[..upto],
+                goal: record.goal,
                 ..Scene::new(world)
             },
             scale,
@@ -289,9 +343,10 @@ pub fn draw_episode(
             robot: Some(RobotMark {
                 pose: last_pose,
                 radius: sim.robot.radius_m,
-                collided: !record.success(),
+                collided: record.collision.is_some(),
             }),
             trail: &trail,
+            goal: record.goal,
             caption: Some(&headline),
             ..Scene::new(world)
         },

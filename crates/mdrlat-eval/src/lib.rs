@@ -20,7 +20,7 @@ pub mod nav;
 pub mod protocol;
 pub mod report;
 
-pub use figures::{EpisodeFigure, Pick, draw_episode, pick_episodes};
+pub use figures::{EpisodeFigure, Pick, draw_episode, draw_navigation, pick_episodes};
 pub use nav::{NavRecord, NavSummary, nav_records, navigation_csv, navigation_markdown};
 pub use protocol::{
     EpisodeRecord, EvalSettings, Progress, WorldEval, collision_kind, episode_seed,

@@ -28,10 +28,13 @@ pub struct Scene<'a> {
     pub pedestrians: &'a [(Vec2, f32, f32)],
     /// Laser rays from the sensor pose, if drawn.
     pub laser: Option<LaserRays<'a>>,
-    /// Past robot positions, oldest first (the trajectory).
+    /// Past robot positions, oldest first (the trajectory); a non-finite point separates
+    /// trajectories (each start gets its ring).
     pub trail: &'a [Vec2],
     /// The navigation goal, if any.
     pub goal: Option<Vec2>,
+    /// Further goals, marked as `goal` is (several episodes in one picture).
+    pub goals: &'a [Vec2],
     /// A line (or several, split at `\n`, wrapped to the picture's width, at most 40) drawn
     /// below the map, e.g. `"train  step 42  v 0.50 w -0.26  r 0.47"`.
     pub caption: Option<&'a str>,
@@ -47,6 +50,7 @@ impl<'a> Scene<'a> {
             laser: None,
             trail: &[],
             goal: None,
+            goals: &[],
             caption: None,
         }
     }
@@ -549,9 +553,10 @@ fn draw_marks(pm: &mut Pixmap, lay: &Layout, scene: &Scene) {
     let f = &lay.frame;
     let ts = lay.ts as f32;
     let s = f.px_per_m;
-    // Trajectory: a polyline, broken at non-finite points, with a ring at its start.
+    // Trajectory: a polyline, broken at non-finite points, with a ring at each start.
     let mut pb = PathBuilder::new();
     let mut pen_down = false;
+    let mut starts = Vec::new();
     for &p in scene.trail {
         if !p.is_finite() {
             pen_down = false;
@@ -562,14 +567,14 @@ fn draw_marks(pm: &mut Pixmap, lay: &Layout, scene: &Scene) {
             pb.line_to(x, y);
         } else {
             pb.move_to(x, y);
+            starts.push((x, y));
             pen_down = true;
         }
     }
     if let Some(path) = pb.finish() {
         stroke(pm, &path, style::TRAIL, 220, 1.5 * ts);
     }
-    if let Some(&p0) = scene.trail.iter().find(|p| p.is_finite()) {
-        let (x, y) = f.to_px(p0);
+    for (x, y) in starts {
         if let Some(c) = PathBuilder::from_circle(x, y, 2.5 * ts) {
             stroke(pm, &c, style::TRAIL, 255, 1.0 * ts);
         }
@@ -591,7 +596,7 @@ fn draw_marks(pm: &mut Pixmap, lay: &Layout, scene: &Scene) {
             fill(pm, &p, [255, 255, 255], 255);
         }
     }
-    if let Some(g) = scene.goal.filter(|g| g.is_finite()) {
+    for &g in scene.goal.iter().chain(scene.goals).filter(|g| g.is_finite()) {
         let (x, y) = f.to_px(g);
         let h = (0.12 * s).max(4.0 * ts);
         if let Some(p) = rect_path(x - h, y - h, x + h, y + h) {

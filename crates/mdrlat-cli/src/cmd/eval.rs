@@ -9,9 +9,9 @@ use crate::progress;
 use anyhow::{Context, Result, bail};
 use mdrlat_core::Policy;
 use mdrlat_eval::{
-    EvalSettings, NavSummary, Timing, WorldEval, WorldSummary, draw_episode, episodes_csv,
-    eval_sim_config, evaluate_world, nav_records, navigation_csv, navigation_markdown,
-    pick_episodes, summary_csv, summary_markdown,
+    EvalSettings, NavSummary, Timing, WorldEval, WorldSummary, draw_episode, draw_navigation,
+    episodes_csv, eval_sim_config, evaluate_world, nav_records, navigation_csv,
+    navigation_markdown, pick_episodes, summary_csv, summary_markdown,
 };
 use mdrlat_nn::QNetConfig;
 use mdrlat_plan::{MapSource, PlannerOptions, PlannerPolicy};
@@ -84,7 +84,8 @@ pub struct Args {
     /// Print one JSON object per world on stdout (results and timing) instead of the table.
     #[arg(long)]
     json: bool,
-    /// Draw Figs. 6/7 for this many episodes (the longest successes and the dead ends).
+    /// Draw Figs. 6/7 for this many episodes (the longest successes and the dead ends); with
+    /// `--task nav` also Fig. 9, the first K start/goal pairs of run 0 on one map.
     #[arg(long, default_value_t = 0, value_name = "K", allow_negative_numbers = true)]
     figures: usize,
     /// Environments stepped together; the network decides for all running ones in one
@@ -332,6 +333,17 @@ pub fn run(a: &Args) -> Result<()> {
                 format!("{}-run{}-ep{}", file_stem(&record.world), record.run, record.episode);
             fig.strip.save_png(&dir.join(format!("{stem}.png")))?;
             fig.trajectory.save_png(&dir.join(format!("{stem}-trajectory.png")))?;
+        }
+        if nav {
+            // Fig. 9: the first K start/goal pairs of run 0 (the same for every method
+            // evaluated with this seed), all on one map.
+            let sim = eval_sim_config(&config.sim, &settings);
+            for ((world, e), (n, _)) in worlds.iter().zip(&evals).zip(&navigation) {
+                let records: Vec<_> =
+                    e.records.iter().filter(|r| r.run == 0).take(a.figures).collect();
+                let fig = draw_navigation(world, &sim, &records, &n.eval)?;
+                fig.save_png(&dir.join(format!("{}-fig9.png", file_stem(&world.name))))?;
+            }
         }
         written.push("figures/");
     }

@@ -122,6 +122,7 @@ pub fn snapshot(env: &Env, trail: &[Vec2], caption: &str, collided: bool, scale:
             max_range: laser.config().max_range_m,
         }),
         trail,
+        goal: env.goal(),
         caption: Some(caption),
         ..Scene::new(env.world())
     };
