@@ -18,6 +18,8 @@ fn the_planner_is_evaluated_on_the_navigation_task_reproducibly() {
             "4",
             "--runs",
             "1",
+            "--figures",
+            "2",
             "--out",
             out.to_str().expect("utf-8"),
         ]);
@@ -25,7 +27,13 @@ fn the_planner_is_evaluated_on_the_navigation_task_reproducibly() {
         out
     };
     let (a, b) = (run("a"), run("b"));
-    for f in ["episodes.csv", "summary.csv", "navigation.csv", "navigation.md"] {
+    for f in [
+        "episodes.csv",
+        "summary.csv",
+        "navigation.csv",
+        "navigation.md",
+        "figures/nav-test-fig9.png",
+    ] {
         let read = |d: &std::path::Path| std::fs::read(d.join(f)).expect(f);
         assert_eq!(read(&a), read(&b), "{f}: same seed, same bytes");
     }

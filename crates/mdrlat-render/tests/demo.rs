@@ -59,6 +59,7 @@ fn frame(world: &mdrlat_world::World, step: usize, trail: &mut Vec<Vec2>) -> Ima
         laser: Some(LaserRays { origin: pose, angles: &angles, ranges: &ranges, max_range: 5.6 }),
         trail,
         goal: Some(Vec2::new(5.0, 9.0)),
+        goals: &[],
         caption: Some(&caption),
     };
     let top = top_view(&scene, 60.0);
