@@ -83,6 +83,24 @@ fn bad_navigation_arguments_are_clear_errors() {
         &eval(&["--task", "nav", "--checkpoint", model]),
         &["laser-only network of the obstacle-avoidance task", "--task nav"],
     );
+    // Training learns obstacle avoidance only so far: a navigation config is refused.
+    let config = dir.join("nav.toml");
+    std::fs::write(&config, "[sim]\ntask = \"nav\"\n").expect("config");
+    let run = dir.join("run");
+    let o = mdrlat(&[
+        "train",
+        "--variant",
+        "laser-only",
+        "--world",
+        "nav-train",
+        "--steps",
+        "10",
+        "--config",
+        config.to_str().expect("utf-8"),
+        "--out",
+        run.to_str().expect("utf-8"),
+    ]);
+    assert_clean_failure(&o, &["sim.task = \"nav\": training learns obstacle avoidance only"]);
     // A goal the robot cannot reach: inside a walled-off square.
     let world = dir.join("closed.toml");
     std::fs::write(

@@ -31,6 +31,13 @@ pub enum TrainError {
     /// The settings are inconsistent.
     #[error(transparent)]
     Config(#[from] crate::config::TrainConfigError),
+    /// The simulator runs a task this learner does not train.
+    #[error(
+        "sim.task = \"{0}\": training learns obstacle avoidance only so far (the replay buffer \
+         and the network do not take the goal input yet); the navigation task runs in \
+         `mdrlat eval --task nav` with the classical planner"
+    )]
+    Task(mdrlat_sim::config::Task),
     /// The simulator failed.
     #[error(transparent)]
     Sim(#[from] SimError),
@@ -256,6 +263,9 @@ pub fn train(
     mut progress: impl FnMut(&Status),
 ) -> Result<(TrainReport, Learner), TrainError> {
     config.validate()?;
+    if sim.task != mdrlat_sim::config::Task::Avoid {
+        return Err(TrainError::Task(sim.task));
+    }
     let started = Instant::now();
     let scene = Arc::new(StaticScene::new(Arc::new(world), sim));
     let mut env = Env::new(scene.clone(), sim.clone())?;
