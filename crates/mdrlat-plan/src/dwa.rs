@@ -76,7 +76,7 @@ impl Default for DwaConfig {
             horizon_s: 1.6,
             step_s: 0.2,
             control_dt_s: 0.2,
-            v_samples: 6,
+            v_samples: 4,
             w_samples: 11,
             lookahead_m: 0.8,
             path_weight: 3.0,
