@@ -47,6 +47,35 @@ fn the_planner_is_evaluated_on_the_navigation_task_reproducibly() {
 }
 
 #[test]
+fn a_planner_rollout_drives_to_its_goal() {
+    let dir = tmp("nav", "rollout");
+    let csv = dir.join("pl.csv");
+    let o = mdrlat(&[
+        "rollout",
+        "--world",
+        "nav-test",
+        "--task",
+        "nav",
+        "--policy",
+        "planner-body",
+        "--start",
+        "1.0,1.0,0",
+        "--goal",
+        "8.2,9.3",
+        "--steps",
+        "300",
+        "--out",
+        csv.to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("0 collision(s), 1 goal(s) reached"), "{said}");
+    let rows = std::fs::read_to_string(&csv).expect("csv");
+    let last = rows.lines().last().expect("a row");
+    assert!(last.contains(",1,0,"), "terminated, not truncated: {last}");
+}
+
+#[test]
 fn bad_navigation_arguments_are_clear_errors() {
     let dir = tmp("nav", "bad");
     let out = dir.join("out");

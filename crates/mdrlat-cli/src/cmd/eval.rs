@@ -1,9 +1,8 @@
 //! `mdrlat eval`: the paper's success-rate protocol (Table 2) for a trained run or a
 //! scripted baseline, in any worlds, with Figs. 6/7 on request.
 
-use super::rollout::parse_scripted;
 use super::train::DeviceKind;
-use super::{TaskArgs, ensure_dir, load_world};
+use super::{PolicyArg, TaskArgs, ensure_dir, load_world};
 use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result, bail};
@@ -14,8 +13,7 @@ use mdrlat_eval::{
     navigation_markdown, pick_episodes, summary_csv, summary_markdown,
 };
 use mdrlat_nn::QNetConfig;
-use mdrlat_plan::{MapSource, PlannerOptions, PlannerPolicy};
-use mdrlat_sim::Scripted;
+use mdrlat_plan::MapSource;
 use mdrlat_sim::config::Task;
 use mdrlat_train::GreedyPolicy;
 use std::path::{Path, PathBuf};
@@ -25,25 +23,6 @@ const TEST_WORLDS: [&str; 3] = ["office", "furnished", "crowd"];
 
 /// The navigation extension's unseen test world (Fig. 8 right).
 const NAV_TEST_WORLDS: [&str; 1] = ["nav-test"];
-
-/// `--policy`: a scripted baseline or the classical planner.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum PolicyArg {
-    /// A scripted policy of the simulator.
-    Scripted(Scripted),
-    /// The classical planner (A* + DWA) with this map.
-    Planner(MapSource),
-}
-
-fn parse_policy(s: &str) -> Result<PolicyArg, String> {
-    match s {
-        "planner" => Ok(PolicyArg::Planner(MapSource::LaserPlane)),
-        "planner-body" => Ok(PolicyArg::Planner(MapSource::Body)),
-        _ => parse_scripted(s)
-            .map(PolicyArg::Scripted)
-            .map_err(|e| format!("{e}; navigation: planner, planner-body")),
-    }
-}
 
 /// Arguments of `mdrlat eval`.
 #[derive(Debug, clap::Args)]
@@ -56,7 +35,7 @@ pub struct Args {
     /// (`wander` is the non-learned baseline row beside the six methods); with `--task nav`,
     /// `planner` (the paper's move_base: A* on a laser-plane map of the world + DWA) or
     /// `planner-body` (its map holds everything the body can hit).
-    #[arg(long, value_parser = parse_policy)]
+    #[arg(long, value_parser = super::parse_policy)]
     policy: Option<PolicyArg>,
     /// World to evaluate in (repeatable): a built-in name, a .toml world file or a
     /// map_server .yaml (default: the paper's test worlds office, furnished and crowd;
@@ -221,9 +200,7 @@ pub fn run(a: &Args) -> Result<()> {
             Some(PolicyArg::Planner(m)) => m,
             _ => MapSource::LaserPlane,
         };
-        let options = PlannerOptions { map, ..PlannerOptions::default() };
-        let p = PlannerPolicy::new(world, &config.sim, &options).map_err(anyhow::Error::msg)?;
-        Ok(Box::new(p))
+        super::planner(world, &config.sim, map)
     };
     check_out(&a.out, a.overwrite)?;
 

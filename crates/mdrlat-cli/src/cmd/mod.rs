@@ -18,7 +18,9 @@ pub mod worlds;
 use anyhow::{Context, Result, bail};
 use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS};
 use mdrlat_geom::{Pose2, Vec2};
+use mdrlat_plan::{MapSource, PlannerOptions, PlannerPolicy};
 use mdrlat_render::{Image, LaserRays, RobotMark, Scene, depth_view, side_by_side, top_view};
+use mdrlat_sim::Scripted;
 use mdrlat_sim::config::Task;
 use mdrlat_sim::{Env, SimConfig};
 use mdrlat_world::World;
@@ -55,6 +57,40 @@ pub fn parse_numbers(flag: &str, s: &str, n: usize, expected: &str) -> Result<Ve
 pub fn parse_pose(s: &str) -> Result<Pose2> {
     let v = parse_numbers("--pose", s, 3, "X,Y,YAW_DEG")?;
     Ok(Pose2::new(v[0], v[1], v[2].to_radians()))
+}
+
+/// `--policy`: a scripted baseline or the classical planner.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PolicyArg {
+    /// A scripted policy of the simulator.
+    Scripted(Scripted),
+    /// The classical planner (A* + DWA) with this map.
+    Planner(MapSource),
+}
+
+pub fn parse_policy(s: &str) -> Result<PolicyArg, String> {
+    match s {
+        "planner" => Ok(PolicyArg::Planner(MapSource::LaserPlane)),
+        "planner-body" => Ok(PolicyArg::Planner(MapSource::Body)),
+        _ => s
+            .parse::<Scripted>()
+            .map(PolicyArg::Scripted)
+            .map_err(|e| format!("{e}; navigation: planner, planner-body")),
+    }
+}
+
+/// The classical planner for `world`, driving a robot with `sim`'s body and sensors.
+///
+/// # Errors
+/// A map that cannot be built.
+pub fn planner(
+    world: &World,
+    sim: &SimConfig,
+    map: MapSource,
+) -> Result<Box<dyn mdrlat_core::Policy>> {
+    let options = PlannerOptions { map, ..PlannerOptions::default() };
+    let p = PlannerPolicy::new(world, sim, &options).map_err(anyhow::Error::msg)?;
+    Ok(Box::new(p))
 }
 
 /// The task flags of the commands that run episodes.

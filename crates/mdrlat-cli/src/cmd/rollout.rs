@@ -43,9 +43,13 @@ pub struct Args {
     /// Consecutive episodes (the random streams continue from one to the next).
     #[arg(long, default_value_t = 1)]
     episodes: u32,
-    /// Who drives: random, forward, wander or wander-laser.
-    #[arg(long, default_value = "random", value_parser = parse_scripted)]
-    policy: Scripted,
+    /// Who drives: random, forward, wander or wander-laser; with `--task nav` also planner
+    /// or planner-body (A* + DWA, see `mdrlat eval`).
+    #[arg(long, default_value = "random", value_parser = super::parse_policy)]
+    policy: super::PolicyArg,
+    /// The task, and a fixed start and goal for navigation.
+    #[command(flatten)]
+    task: super::TaskArgs,
     /// Start pose X,Y,YAW_DEG of the first episode (default: a seeded random free pose).
     #[arg(long, allow_hyphen_values = true)]
     pose: Option<String>,
@@ -191,11 +195,19 @@ impl Observer for Recorder {
 
 /// Runs `mdrlat rollout`.
 pub fn run(a: &Args) -> Result<()> {
-    let config = Config::load_or_default(a.config.as_deref())?;
+    let mut config = Config::load_or_default(a.config.as_deref())?;
+    a.task.apply(&mut config.sim)?;
+    config.sim.validate()?;
     let world = load_world(&a.world)?;
     let scale = px_per_m(&world, 480.0);
+    let mut policy = match a.policy {
+        super::PolicyArg::Scripted(s) => s.build(&config.sim, a.seed),
+        super::PolicyArg::Planner(_) if config.sim.task != mdrlat_sim::config::Task::Nav => {
+            anyhow::bail!("--policy planner drives to a goal: add --task nav")
+        }
+        super::PolicyArg::Planner(map) => super::planner(&world, &config.sim, map)?,
+    };
     let mut venv = single_env(world, &config.sim)?;
-    let mut policy = a.policy.build(&config.sim, a.seed);
     let mut rec = Recorder::create(&a.out, a.gif.as_deref(), scale)?;
     let first =
         EpisodeSpec { seed: Some(a.seed), pose: a.pose.as_deref().map(parse_pose).transpose()? };
@@ -205,10 +217,15 @@ pub fn run(a: &Args) -> Result<()> {
     let outcomes = rec.run(&mut venv, policy.as_mut(), &specs, a.steps, Some(pb))?;
     rec.finish()?;
     let total_steps: u64 = outcomes.iter().map(|o| u64::from(o.steps)).sum();
-    let collisions = outcomes.iter().filter(|o| !o.success()).count();
+    let collisions = outcomes.iter().filter(|o| o.collision.is_some()).count();
     let total_reward: f64 = outcomes.iter().map(|o| f64::from(o.reward)).sum();
+    let goals = if outcomes.iter().any(|o| o.goal.is_some()) {
+        format!(", {} goal(s) reached", outcomes.iter().filter(|o| o.reached_goal).count())
+    } else {
+        String::new()
+    };
     out!(
-        "{} episode(s), {} steps, {} collision(s), mean episode reward {:.2}; wrote {}{}",
+        "{} episode(s), {} steps, {} collision(s){goals}, mean episode reward {:.2}; wrote {}{}",
         a.episodes,
         total_steps,
         collisions,
