@@ -211,9 +211,6 @@ pub struct EnvState {
     /// The navigation task's goal (absent in obstacle avoidance and in older states).
     #[serde(default)]
     pub goal: Option<Vec2>,
-    /// The distance to it after the last step, metres.
-    #[serde(default)]
-    pub goal_distance: f32,
 }
 
 /// One simulated robot in one world.
@@ -236,8 +233,6 @@ pub struct Env {
     running: bool,
     /// The navigation task's goal of this episode.
     goal: Option<Vec2>,
-    /// The distance to it after the last step, metres.
-    goal_distance: f32,
     scratch: GridScratch,
     buf: Vec<u32>,
 }
@@ -268,7 +263,6 @@ impl Env {
             w_prev: 0.0,
             running: false,
             goal: None,
-            goal_distance: 0.0,
             scratch: GridScratch::default(),
             buf: Vec::new(),
         })
@@ -337,7 +331,6 @@ impl Env {
             Some(Some([x, y])) => Some(Vec2::new(x, y)),
             Some(None) => Some(self.sample_goal(pose.position())?),
         };
-        self.goal_distance = self.goal.map_or(0.0, |g| (g - pose.position()).length());
         self.robot = RobotState { pose, velocity: Velocity::default() };
         self.steps = 0;
         self.w_prev = 0.0;
@@ -505,6 +498,7 @@ impl Env {
         if !self.running {
             return Err(SimError::NeedsReset);
         }
+        let start = self.robot.pose.position();
         let sub_dt = self.config.dt_s / self.config.substeps as f32;
         let mut collision = None;
         for _ in 0..self.config.substeps {
@@ -529,8 +523,7 @@ impl Env {
             Some(goal) => {
                 let distance = (goal - self.robot.pose.position()).length();
                 reached_goal = collision.is_none() && distance <= self.config.nav.goal_radius_m;
-                let progress_m = self.goal_distance - distance;
-                self.goal_distance = distance;
+                let progress_m = (goal - start).length() - distance;
                 let step = NavStep {
                     collided: collision.is_some(),
                     reached: reached_goal,
@@ -580,7 +573,6 @@ impl Env {
             w_prev: self.w_prev,
             running: self.running,
             goal: self.goal,
-            goal_distance: self.goal_distance,
         }
     }
 
@@ -632,7 +624,6 @@ impl Env {
         self.w_prev = state.w_prev;
         self.running = state.running;
         self.goal = state.goal;
-        self.goal_distance = state.goal_distance;
         let pose = self.robot.pose;
         self.obs.goal = self.goal.map(|g| goal_in_robot_frame(pose.x, pose.y, pose.yaw, g.x, g.y));
         self.obs.pose = Some([pose.x, pose.y, pose.yaw]);

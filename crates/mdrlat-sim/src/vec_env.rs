@@ -358,9 +358,11 @@ impl VecEnv {
         &mut self,
         actions: &[Option<Action>],
     ) -> Result<&[Option<VecStep>], SimError> {
-        let commands: Vec<Option<Velocity>> =
-            actions.iter().map(|a| a.map(Action::command)).collect();
-        self.step_masked_commands(&commands)
+        if actions.len() != self.len() {
+            return Err(SimError::ActionCount { expected: self.len(), got: actions.len() });
+        }
+        self.run_commands(actions.iter().map(|a| a.map(Action::command)))?;
+        self.masked_outcomes()
     }
 
     /// [`VecEnv::step_masked`] with velocity commands (`Env::step_command`), as a continuous
@@ -376,6 +378,11 @@ impl VecEnv {
             return Err(SimError::ActionCount { expected: self.len(), got: commands.len() });
         }
         self.run_commands(commands.iter().copied())?;
+        self.masked_outcomes()
+    }
+
+    /// The outcomes of the last masked step, in order.
+    fn masked_outcomes(&mut self) -> Result<&[Option<VecStep>], SimError> {
         self.masked.clear();
         self.outcomes.clear();
         for c in &self.chunks {
