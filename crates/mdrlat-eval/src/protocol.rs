@@ -141,12 +141,9 @@ pub struct EpisodeRecord {
 
 impl EpisodeRecord {
     /// Obstacle avoidance: no collision within the step budget. Navigation: the goal
-    /// reached.
+    /// reached ([`mdrlat_sim::episode_success`]).
     pub fn success(&self) -> bool {
-        match self.goal {
-            None => self.collision.is_none(),
-            Some(_) => self.reached_goal,
-        }
+        mdrlat_sim::episode_success(self.goal, self.reached_goal, self.collision)
     }
 }
 

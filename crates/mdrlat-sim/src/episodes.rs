@@ -56,14 +56,23 @@ pub struct EpisodeOutcome {
     pub rows: Vec<TrajectoryRow>,
 }
 
+/// The one success rule: in obstacle avoidance (no goal) an episode without a collision
+/// within its steps; in navigation one that reached its goal.
+pub fn episode_success(
+    goal: Option<Vec2>,
+    reached_goal: bool,
+    collision: Option<Collision>,
+) -> bool {
+    match goal {
+        None => collision.is_none(),
+        Some(_) => reached_goal,
+    }
+}
+
 impl EpisodeOutcome {
-    /// Obstacle avoidance: no collision happened (within the steps it ran). Navigation:
-    /// the robot reached its goal.
+    /// See [`episode_success`].
     pub fn success(&self) -> bool {
-        match self.goal {
-            None => self.collision.is_none(),
-            Some(_) => self.reached_goal,
-        }
+        episode_success(self.goal, self.reached_goal, self.collision)
     }
 }
 
