@@ -1,4 +1,6 @@
-//! `mdrlat eval --task nav`: the classical planner end to end, its outputs, and bad input.
+//! The navigation task end to end: `mdrlat eval --task nav` with the classical planner and
+//! with a goal-conditioned network trained by `mdrlat train --task nav`, their outputs, and
+//! bad input.
 
 mod common;
 use common::{assert_clean_failure, mdrlat, stderr, tmp};
@@ -75,6 +77,93 @@ fn a_planner_rollout_drives_to_its_goal() {
     assert!(last.contains(",1,0,"), "terminated, not truncated: {last}");
 }
 
+/// A few hundred steps of `train --task nav` make a goal-conditioned network that
+/// `eval --task nav` runs (the same bytes twice) and no other task accepts.
+#[test]
+fn a_goal_conditioned_network_trains_and_is_evaluated_on_navigation() {
+    let dir = tmp("nav", "train");
+    let run = dir.join("run");
+    let r = run.to_str().expect("utf-8");
+    let mut args = vec!["train", "--task", "nav", "--variant", "laser-only", "--steps", "150"];
+    let sets = [
+        "train.learning_starts=40",
+        "train.eval_interval=100",
+        "train.eval_episodes=2",
+        "train.checkpoint_interval=100",
+        "sim.max_episode_steps=40",
+    ];
+    for set in &sets {
+        args.extend(["--set", set]);
+    }
+    let o = mdrlat(&[args.as_slice(), &["--out", r]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("laser-only (nav) in 'nav-train'"), "{said}");
+    assert!(said.contains("of goals reached"), "{said}");
+    let cfg = std::fs::read_to_string(run.join("config.toml")).expect("config");
+    assert!(cfg.contains("task = \"nav\""), "{cfg}");
+    // Resuming keeps the task (from the run's config) and extends the run.
+    let o = mdrlat(&["train", "--resume", r, "--steps", "160"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_clean_failure(
+        &mdrlat(&["train", "--resume", r, "--task", "avoid"]),
+        &["--task", "cannot be used with"],
+    );
+    let eval = |out: &str, extra: &[&str]| {
+        let out = dir.join(out);
+        let mut a = vec!["eval", "--checkpoint", r, "--episodes", "3", "--runs", "1"];
+        a.extend_from_slice(extra);
+        a.extend(["--out", out.to_str().expect("utf-8")]);
+        (mdrlat(&a), out)
+    };
+    let (o, a) = eval("a", &["--task", "nav"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (o, b) = eval("b", &["--task", "nav"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in ["episodes.csv", "navigation.csv", "navigation.md"] {
+        let read = |d: &std::path::Path| std::fs::read(d.join(f)).expect(f);
+        assert_eq!(read(&a), read(&b), "{f}: same seed, same bytes");
+    }
+    let md = std::fs::read_to_string(a.join("navigation.md")).expect("navigation.md");
+    assert!(md.contains("laser-only from"), "{md}");
+    // The model file records the task: it, too, evaluates on navigation only.
+    let bytes = std::fs::read(run.join("model.safetensors")).expect("model");
+    let n = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes")) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).expect("json header");
+    assert_eq!(header["__metadata__"]["mdrlat_task"], "nav");
+    let (o, _) = eval("c", &[]);
+    assert_clean_failure(
+        &o,
+        &["laser-only network trained for navigation", "--task avoid", "--task avoid"],
+    );
+    let model = run.join("model.safetensors");
+    let o = mdrlat(&[
+        "eval",
+        "--checkpoint",
+        model.to_str().expect("utf-8"),
+        "--episodes",
+        "2",
+        "--runs",
+        "1",
+        "--out",
+        dir.join("d").to_str().expect("utf-8"),
+    ]);
+    assert_clean_failure(&o, &["trained for navigation"]);
+    // A world without goal regions cannot train navigation.
+    let o = mdrlat(&[
+        "train",
+        "--task",
+        "nav",
+        "--world",
+        "office",
+        "--steps",
+        "10",
+        "--out",
+        dir.join("office").to_str().expect("utf-8"),
+    ]);
+    assert_clean_failure(&o, &["office", "no goal region"]);
+}
+
 #[test]
 fn bad_navigation_arguments_are_clear_errors() {
     let dir = tmp("nav", "bad");
@@ -112,24 +201,6 @@ fn bad_navigation_arguments_are_clear_errors() {
         &eval(&["--task", "nav", "--checkpoint", model]),
         &["laser-only network of the obstacle-avoidance task", "--task nav"],
     );
-    // Training learns obstacle avoidance only so far: a navigation config is refused.
-    let config = dir.join("nav.toml");
-    std::fs::write(&config, "[sim]\ntask = \"nav\"\n").expect("config");
-    let run = dir.join("run");
-    let o = mdrlat(&[
-        "train",
-        "--variant",
-        "laser-only",
-        "--world",
-        "nav-train",
-        "--steps",
-        "10",
-        "--config",
-        config.to_str().expect("utf-8"),
-        "--out",
-        run.to_str().expect("utf-8"),
-    ]);
-    assert_clean_failure(&o, &["sim.task = \"nav\": training learns obstacle avoidance only"]);
     // A goal the robot cannot reach: inside a walled-off square.
     let world = dir.join("closed.toml");
     std::fs::write(

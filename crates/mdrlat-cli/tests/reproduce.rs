@@ -179,6 +179,61 @@ fn a_failed_job_leaves_a_table_that_says_what_is_missing() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The navigation preset's shape in miniature: a goal-conditioned network trained in
+/// nav-train, evaluated in nav-test against the classical planner, with the navigation
+/// table, the paper's navigation claims and one Fig. 9 per method.
+#[test]
+fn a_navigation_sweep_writes_its_table_and_a_fig9_per_method() {
+    let dir = tmp("nav");
+    let sweep = dir.join("nav.toml");
+    std::fs::write(
+        &sweep,
+        r#"
+name = "nav-test"
+task = "nav"
+variants = ["laser-only"]
+seeds = [0]
+steps = 150
+world = "nav-train"
+set = ["train.learning_starts=50", "train.eval_interval=100", "train.eval_episodes=2",
+       "train.checkpoint_interval=100"]
+
+[eval]
+worlds = ["nav-test"]
+episodes = 3
+runs = 1
+max_steps = 150
+baselines = ["planner-body"]
+figures = 2
+"#,
+    )
+    .expect("sweep");
+    let out = dir.join("out");
+    let o = Command::new(EXE)
+        .args(["reproduce", "--sweep"])
+        .arg(&sweep)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("run");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let nav = std::fs::read_to_string(out.join("navigation.md")).expect("navigation.md");
+    assert!(nav.contains("| laser-only | nav-test |"), "{nav}");
+    assert!(nav.contains("| planner-body | nav-test |"), "{nav}");
+    let table = std::fs::read_to_string(out.join("table2.md")).expect("table2.md");
+    assert!(table.contains("# Navigation: success rate") && !table.contains("paper 6"), "{table}");
+    let report = std::fs::read_to_string(out.join("report.md")).expect("report.md");
+    assert!(report.contains("MDRLAT reaches every goal") && report.contains("cannot be checked"));
+    for job in ["eval/laser-only-s0", "eval/planner-body"] {
+        let png = format!("{job}/figures/nav-test-fig9.png");
+        assert!(out.join(&png).is_file(), "{png}");
+        assert!(report.contains(&format!("({png})")), "{report}");
+    }
+    let log = std::fs::read_to_string(out.join("logs/train-laser-only-s0.log")).expect("log");
+    assert!(log.contains("--task nav"), "{log}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn presets_print_and_bad_input_is_one_clear_line() {
     let o = mdrlat(&["reproduce", "--print", "paper"]);
@@ -216,6 +271,13 @@ fn presets_print_and_bad_input_is_one_clear_line() {
     bad("set.toml", "train.eval_episodes=2", "train.eval_episode=2", &["set.toml", "eval_episode"]);
     bad("world.toml", "\"crowd\"]", "\"mall\"]", &["world.toml", "eval.worlds", "mall"]);
     bad("device.toml", "steps = 240", "steps = 240\ndevice = \"tpu\"", &["device.toml", "tpu"]);
+    bad("planner.toml", "[\"wander\"]", "[\"planner\"]", &["planner.toml", "task = \"nav\""]);
+    bad(
+        "goals.toml",
+        "steps = 240",
+        "steps = 240\ntask = \"nav\"",
+        &["goals.toml", "world 'train' has no goal region"],
+    );
     assert_clean_failure(
         &mdrlat(&["reproduce", "--out", dir.join("nothing").to_str().unwrap_or_default()]),
         &["--preset or --sweep"],

@@ -8,7 +8,7 @@
 
 use crate::EvalError;
 use crate::protocol::{EpisodeRecord, WorldEval, collision_kind};
-use crate::report::csv_field;
+use crate::report::{csv_field, csv_split};
 use mdrlat_plan::{CostMap, MapKind, OccupancyGrid, astar};
 use mdrlat_sim::SimConfig;
 use mdrlat_world::World;
@@ -24,6 +24,8 @@ pub struct NavRecord {
     pub reached: bool,
     /// Neither reached nor collided: the step budget ran out.
     pub timeout: bool,
+    /// It ended in a collision.
+    pub collided: bool,
     /// Seconds to the goal (reached episodes).
     pub time_s: Option<f32>,
     /// Distance driven, metres.
@@ -69,6 +71,7 @@ fn nav_record(map: &CostMap, r: &EpisodeRecord, dt_s: f32) -> Result<NavRecord, 
     Ok(NavRecord {
         reached,
         timeout: !reached && r.collision.is_none(),
+        collided: r.collision.is_some(),
         time_s: reached.then_some(r.steps as f32 * dt_s),
         path_m: r.path_m,
         shortest_m: shortest.length_m,
@@ -133,19 +136,64 @@ pub struct NavSummary {
     pub path_ratio_mean: Option<f64>,
 }
 
+/// The rows of a `navigation.csv` as `(world, record)`, in file order; `source` names the
+/// file in errors.
+///
+/// # Errors
+/// Not a `navigation.csv` header, or a row whose fields do not parse (named by line).
+pub fn parse_navigation_csv(text: &str, source: &str) -> Result<Vec<(String, NavRecord)>, String> {
+    let mut lines = text.lines();
+    match lines.next() {
+        Some(h) if h == NAVIGATION_HEADER => {}
+        Some(h) => return Err(format!("{source}:1: not a navigation.csv header: '{h}'")),
+        None => return Err(format!("{source}: empty file")),
+    }
+    let mut rows = Vec::new();
+    for (n, line) in lines.enumerate().filter(|(_, l)| !l.is_empty()) {
+        let at = |col: &str, v: &str| format!("{source}:{}: {col} '{v}' is not valid", n + 2);
+        let f = csv_split(line);
+        if f.len() != 13 {
+            return Err(format!("{source}:{}: {} fields, expected 13", n + 2, f.len()));
+        }
+        let flag = |i: usize, col: &str| match f[i].as_str() {
+            "0" => Ok(false),
+            "1" => Ok(true),
+            v => Err(at(col, v)),
+        };
+        let num = |i: usize, col: &str| f[i].parse::<f32>().map_err(|_| at(col, &f[i]));
+        let (reached, timeout) = (flag(6, "reached")?, flag(7, "timeout")?);
+        let time_s = if f[9].is_empty() { None } else { Some(num(9, "time_s")?) };
+        if reached != time_s.is_some() || (reached && timeout) {
+            return Err(format!("{source}:{}: reached, timeout and time_s disagree", n + 2));
+        }
+        rows.push((
+            f[0].clone(),
+            NavRecord {
+                reached,
+                timeout,
+                collided: !f[8].is_empty(),
+                time_s,
+                path_m: num(10, "path_m")?,
+                shortest_m: num(11, "shortest_m")?,
+            },
+        ));
+    }
+    Ok(rows)
+}
+
 impl NavSummary {
-    /// Summarises one world.
-    pub fn new(eval: &str, w: &WorldEval, navs: &[NavRecord]) -> Self {
+    /// Summarises the episodes `navs` of `eval` in `world`.
+    pub fn new(eval: &str, world: &str, navs: &[NavRecord]) -> Self {
         let ok: Vec<&NavRecord> = navs.iter().filter(|n| n.reached).collect();
         let mean = |f: &dyn Fn(&NavRecord) -> f64| {
             (!ok.is_empty()).then(|| ok.iter().map(|n| f(n)).sum::<f64>() / ok.len() as f64)
         };
         Self {
             eval: eval.to_string(),
-            world: w.world.clone(),
+            world: world.to_string(),
             episodes: navs.len(),
             reached: ok.len(),
-            collisions: w.records.iter().filter(|r| r.collision.is_some()).count(),
+            collisions: navs.iter().filter(|n| n.collided).count(),
             timeouts: navs.iter().filter(|n| n.timeout).count(),
             time_s_mean: mean(&|n| f64::from(n.time_s.unwrap_or(0.0))),
             path_m_mean: mean(&|n| f64::from(n.path_m)),

@@ -20,6 +20,21 @@ pub enum MapSource {
     Body,
 }
 
+impl MapSource {
+    /// The policy names the command line and sweep files give the planner: `planner`
+    /// (laser-plane map) and `planner-body`.
+    pub const POLICY_NAMES: [&str; 2] = ["planner", "planner-body"];
+
+    /// The map of the planner policy called `name`, if it is one.
+    pub fn from_policy_name(name: &str) -> Option<MapSource> {
+        match name {
+            "planner" => Some(MapSource::LaserPlane),
+            "planner-body" => Some(MapSource::Body),
+            _ => None,
+        }
+    }
+}
+
 /// How the planner is set up.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlannerOptions {

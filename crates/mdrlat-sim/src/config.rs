@@ -56,6 +56,14 @@ impl Task {
             Task::Nav => "nav",
         }
     }
+
+    /// Length of the goal input a network of this task reads (0: none).
+    pub fn goal_dim(self) -> usize {
+        match self {
+            Task::Avoid => 0,
+            Task::Nav => mdrlat_core::GOAL_DIM,
+        }
+    }
 }
 
 impl std::fmt::Display for Task {

@@ -6,6 +6,7 @@
 
 use crate::SweepError;
 use crate::plan::{Job, JobKind, Plan, has_checkpoint, io};
+use mdrlat_sim::config::Task;
 use std::path::Path;
 
 /// The `mdrlat` command lines (without the program name) that run `job`, after clearing
@@ -40,6 +41,9 @@ pub fn commands(plan: &Plan, job: &Job, threads: usize) -> Result<Vec<Vec<String
                     "--device".into(),
                     s.device.clone(),
                 ];
+                if s.task != Task::Avoid {
+                    argv.extend(["--task".into(), s.task.to_string()]);
+                }
                 for set in &s.set {
                     argv.push("--set".into());
                     argv.push(set.clone());
@@ -58,9 +62,12 @@ pub fn commands(plan: &Plan, job: &Job, threads: usize) -> Result<Vec<Vec<String
             ]);
             vec![argv]
         }
-        JobKind::EvalBaseline { policy } => {
+        JobKind::EvalBaseline { policy, figures } => {
             let mut argv = eval_args(plan, &dir, threads);
             argv.extend(["--policy".into(), policy.clone()]);
+            if *figures > 0 {
+                argv.extend(["--figures".into(), figures.to_string()]);
+            }
             vec![argv]
         }
         JobKind::Tables => {
@@ -106,6 +113,9 @@ fn eval_args(plan: &Plan, out: &Path, threads: usize) -> Vec<String> {
     for w in &e.worlds {
         argv.push("--world".into());
         argv.push(w.clone());
+    }
+    if plan.sweep.task != Task::Avoid {
+        argv.extend(["--task".into(), plan.sweep.task.to_string()]);
     }
     argv
 }

@@ -24,13 +24,15 @@ pub enum JobKind {
         variant: Variant,
         /// Seed of the run.
         seed: u64,
-        /// Episodes drawn as Figs. 6/7.
+        /// Episodes drawn as Figs. 6/7 (start/goal pairs as Fig. 9 in navigation).
         figures: u32,
     },
-    /// Evaluates a scripted baseline in the test worlds.
+    /// Evaluates a baseline (scripted, or the classical planner) in the test worlds.
     EvalBaseline {
-        /// The baseline's name (`wander`, ...).
+        /// The baseline's name (`wander`, `planner`, ...).
         policy: String,
+        /// Start/goal pairs drawn as Fig. 9 (navigation; 0 in obstacle avoidance).
+        figures: u32,
     },
     /// Table 2, Fig. 4 and the report from every evaluation.
     Tables,
@@ -89,13 +91,11 @@ impl Plan {
             });
         }
         let figure_seed = sweep.seeds.first().copied();
+        // Figs. 6/7 for one model; Fig. 9 (navigation) for every method's first model.
+        let nav = sweep.task == mdrlat_sim::config::Task::Nav;
         for (variant, seed) in sweep.runs() {
-            let figures = if sweep.eval.figure_variant == Some(variant) && Some(seed) == figure_seed
-            {
-                sweep.eval.figures
-            } else {
-                0
-            };
+            let drawn = nav || sweep.eval.figure_variant == Some(variant);
+            let figures = if drawn && Some(seed) == figure_seed { sweep.eval.figures } else { 0 };
             let name = run_name(variant, seed);
             jobs.push(Job {
                 id: format!("eval/{name}"),
@@ -106,7 +106,10 @@ impl Plan {
         for b in &sweep.eval.baselines {
             jobs.push(Job {
                 id: format!("eval/{b}"),
-                kind: JobKind::EvalBaseline { policy: b.clone() },
+                kind: JobKind::EvalBaseline {
+                    policy: b.clone(),
+                    figures: if nav { sweep.eval.figures } else { 0 },
+                },
                 needs: Vec::new(),
             });
         }
@@ -341,6 +344,40 @@ mod tests {
         assert_eq!(e.to_string(), "eval/mdrlat-s0 needs train/mdrlat-s0, which is not finished");
         assert!(plan.check_needs(tables).is_ok(), "the tables say what is missing");
         assert!(plan.job("train/nope").is_err());
+    }
+
+    #[test]
+    fn a_navigation_sweep_draws_fig9_for_every_method_and_passes_its_task() {
+        let dir = std::env::temp_dir().join(format!("mdrlat-plan-nav-{}", std::process::id()));
+        let plan = Plan::new(Sweep::preset("nav").expect("nav"), &dir);
+        for (id, figures) in [
+            ("eval/laser-only-s0", 8),
+            ("eval/mdrlat-s0", 8),
+            ("eval/planner", 8),
+            ("eval/planner-body", 8),
+            ("eval/wander", 8),
+        ] {
+            let job = plan.job(id).expect(id);
+            let drawn = match job.kind {
+                JobKind::EvalModel { figures, .. } | JobKind::EvalBaseline { figures, .. } => {
+                    figures
+                }
+                _ => 0,
+            };
+            assert_eq!(drawn, figures, "{id}");
+            let argv = crate::job::commands(&plan, job, 1).expect("commands").concat();
+            assert!(argv.windows(2).any(|w| w == ["--task", "nav"]), "{id}: {argv:?}");
+        }
+        let train = plan.job("train/mdrlat-s0").expect("train");
+        let argv = crate::job::commands(&plan, train, 1).expect("commands").concat();
+        assert!(argv.windows(2).any(|w| w == ["--task", "nav"]), "{argv:?}");
+        assert!(argv.windows(2).any(|w| w == ["--world", "nav-train"]), "{argv:?}");
+        // Obstacle avoidance: no --task, and baselines draw nothing.
+        let paper = Plan::new(Sweep::preset("paper").expect("paper"), &dir);
+        let wander = paper.job("eval/wander").expect("wander");
+        assert_eq!(wander.kind, JobKind::EvalBaseline { policy: "wander".into(), figures: 0 });
+        let argv = crate::job::commands(&paper, wander, 1).expect("commands").concat();
+        assert!(!argv.contains(&"--task".to_string()), "{argv:?}");
     }
 
     #[test]

@@ -1,16 +1,19 @@
 //! What a sweep is: the variants and seeds to train, for how long, with which settings, and
-//! how their models are evaluated. A TOML file; three presets are built in.
+//! how their models are evaluated. A TOML file; four presets are built in.
 
 use crate::SweepError;
 use mdrlat_nn::Variant;
+use mdrlat_plan::MapSource;
 use mdrlat_sim::Scripted;
+use mdrlat_sim::config::Task;
 use serde::{Deserialize, Serialize};
 
 /// The built-in presets: name and TOML text.
-pub const PRESETS: [(&str, &str); 3] = [
+pub const PRESETS: [(&str, &str); 4] = [
     ("paper", include_str!("../presets/paper.toml")),
     ("cpu-small", include_str!("../presets/cpu-small.toml")),
     ("smoke", include_str!("../presets/smoke.toml")),
+    ("nav", include_str!("../presets/nav.toml")),
 ];
 
 /// The most training runs one sweep may hold (a Slurm array's index range is finite too).
@@ -25,6 +28,10 @@ pub struct Sweep {
     /// One line on what it is.
     #[serde(default)]
     pub description: String,
+    /// The task every run trains and is evaluated on: `avoid` (Table 2; the default) or
+    /// `nav` (the paper's navigation extension, Fig. 9).
+    #[serde(default, skip_serializing_if = "is_avoid")]
+    pub task: Task,
     /// Network variants to train (each trained once per seed).
     pub variants: Vec<Variant>,
     /// Seeds of the training runs.
@@ -59,15 +66,21 @@ pub struct EvalSpec {
     /// Seed of the start poses (the same for every model: paired comparisons).
     #[serde(default)]
     pub seed: u64,
-    /// Scripted baselines evaluated beside the trained models (`wander`, ...).
+    /// Baselines evaluated beside the trained models: scripted policies (`wander`, ...)
+    /// and, in navigation, the classical planner (`planner`, `planner-body`).
     #[serde(default)]
     pub baselines: Vec<String>,
-    /// The variant whose model (first seed) gets Figs. 6/7.
+    /// The variant whose model (first seed) gets Figs. 6/7 (obstacle avoidance; in
+    /// navigation every method's first model and every baseline get Fig. 9).
     #[serde(default)]
     pub figure_variant: Option<Variant>,
-    /// Episodes drawn for Figs. 6/7 (0: none).
+    /// Episodes drawn for Figs. 6/7, or start/goal pairs for Fig. 9 (0: none).
     #[serde(default)]
     pub figures: u32,
+}
+
+fn is_avoid(t: &Task) -> bool {
+    *t == Task::Avoid
 }
 
 fn default_world() -> String {
@@ -201,7 +214,17 @@ impl Sweep {
             )
         })?;
         for b in &e.baselines {
-            b.parse::<Scripted>().map_err(|err| format!("eval.baselines: {err}"))?;
+            if MapSource::from_policy_name(b).is_some() {
+                if self.task != Task::Nav {
+                    return Err(format!(
+                        "eval.baselines: '{b}' drives to a goal: it needs task = \"nav\""
+                    ));
+                }
+                continue;
+            }
+            b.parse::<Scripted>().map_err(|err| {
+                format!("eval.baselines: {err}; navigation: {}", MapSource::POLICY_NAMES.join(", "))
+            })?;
         }
         if let Some(b) = duplicate(&e.baselines) {
             return Err(format!("eval.baselines: '{b}' is listed twice"));

@@ -4,8 +4,10 @@
 
 use crate::SweepError;
 use crate::plan::{Job, JobKind, JobState, Plan, run_name, write_atomic};
+use mdrlat_eval::nav::{NavRecord, NavSummary, navigation_markdown, parse_navigation_csv};
 use mdrlat_eval::{WorldSummary, parse_summary_csv, report::csv_field};
 use mdrlat_nn::Variant;
+use mdrlat_sim::config::Task;
 use std::fmt::Write as _;
 
 /// A world's row of the paper's Table 2: (variant, mean %, std %) per method.
@@ -74,6 +76,27 @@ impl Method {
             Method::Baseline(b) => b.clone(),
         }
     }
+
+    /// The ids of its evaluation jobs in `plan`: one per seed for a variant.
+    fn eval_ids(&self, plan: &Plan) -> Vec<String> {
+        match self {
+            Method::Variant(v) => plan
+                .sweep
+                .seeds
+                .iter()
+                .map(|&seed| format!("eval/{}", run_name(*v, seed)))
+                .collect(),
+            Method::Baseline(b) => vec![format!("eval/{b}")],
+        }
+    }
+
+    /// Every method of a sweep, in column order: the variants, then the baselines.
+    fn all(plan: &Plan) -> Vec<Method> {
+        let s = &plan.sweep;
+        let mut methods: Vec<Method> = s.variants.iter().map(|&v| Method::Variant(v)).collect();
+        methods.extend(s.eval.baselines.iter().map(|b| Method::Baseline(b.clone())));
+        methods
+    }
 }
 
 /// One cell: a method in a world.
@@ -122,6 +145,8 @@ pub struct Table2 {
     pub methods: Vec<Method>,
     /// The worlds, in row order.
     pub worlds: Vec<String>,
+    /// The task (the paper's numbers belong to obstacle avoidance only).
+    pub task: Task,
 }
 
 /// Why a job's results are missing, in words that do not depend on where the folder is
@@ -160,20 +185,14 @@ impl Table2 {
     /// say which and why.
     pub fn gather(plan: &Plan) -> Result<Table2, SweepError> {
         let s = &plan.sweep;
-        let mut methods: Vec<Method> = s.variants.iter().map(|&v| Method::Variant(v)).collect();
-        methods.extend(s.eval.baselines.iter().map(|b| Method::Baseline(b.clone())));
+        let methods = Method::all(plan);
         let summaries: Vec<(&Job, Option<Summary>)> =
             plan.eval_jobs().map(|j| (j, read_summary(plan, j))).collect();
         let find = |id: &str| summaries.iter().find(|(j, _)| j.id == id);
         let mut cells = Vec::new();
         for (w, world) in s.eval.worlds.iter().enumerate() {
             for method in &methods {
-                let ids: Vec<String> = match method {
-                    Method::Variant(v) => {
-                        s.seeds.iter().map(|&seed| format!("eval/{}", run_name(*v, seed))).collect()
-                    }
-                    Method::Baseline(b) => vec![format!("eval/{b}")],
-                };
+                let ids = method.eval_ids(plan);
                 let mut cell = Cell {
                     world: world.clone(),
                     method: method.clone(),
@@ -209,7 +228,7 @@ impl Table2 {
                 cells.push(cell);
             }
         }
-        Ok(Table2 { cells, methods, worlds: s.eval.worlds.clone() })
+        Ok(Table2 { cells, methods, worlds: s.eval.worlds.clone(), task: s.task })
     }
 
     fn cell(&self, world: &str, method: &Method) -> Option<&Cell> {
@@ -249,8 +268,8 @@ impl Table2 {
                 (format!("{m:.2}"), format!("{d:.2}"))
             });
             let paper = match &c.method {
-                Method::Variant(v) => paper_cell(&c.world, *v),
-                Method::Baseline(_) => None,
+                Method::Variant(v) if self.task == Task::Avoid => paper_cell(&c.world, *v),
+                _ => None,
             };
             let (pm, ps) = paper.map_or((String::new(), String::new()), |(m, d)| {
                 (format!("{m:.1}"), format!("{d:.1}"))
@@ -277,8 +296,10 @@ impl Table2 {
     pub fn markdown(&self, plan: &Plan) -> String {
         let sw = &plan.sweep;
         let mut s = String::new();
+        let nav = self.task == Task::Nav;
+        let title = if nav { "Navigation" } else { "Table 2" };
         let _ =
-            writeln!(s, "# Table 2: success rate (%) in the unseen worlds — sweep `{}`\n", sw.name);
+            writeln!(s, "# {title}: success rate (%) in the unseen worlds — sweep `{}`\n", sw.name);
         if !self.complete() {
             let missing = self.missing();
             let empty = self.cells.iter().filter(|c| c.stats().is_none()).count();
@@ -292,10 +313,16 @@ impl Table2 {
             }
             s.push('\n');
         }
+        let success = if nav { "the goal reached within" } else { "no collision in" };
+        let paper = if nav {
+            "The paper gives no navigation numbers (its Fig. 9 shows trajectories only)."
+        } else {
+            "Paper (Song et al. 2021, Table 2): 400,000 steps, 5 runs of 50 episodes."
+        };
         let _ = writeln!(
             s,
-            "Ours: mean ± population std over {} seed(s) × {} run(s) of {} episodes (success = no collision in {} steps), \
-             {} training steps per run in `{}`. Paper (Song et al. 2021, Table 2): 400,000 steps, 5 runs of 50 episodes.\n",
+            "Ours: mean ± population std over {} seed(s) × {} run(s) of {} episodes (success = {success} {} steps), \
+             {} training steps per run in `{}`. {paper}\n",
             sw.seeds.len(),
             sw.eval.runs,
             sw.eval.episodes,
@@ -320,9 +347,9 @@ impl Table2 {
                     .and_then(Cell::stats)
                     .map_or("—".to_string(), |(a, b)| format!("**{a:.1} ± {b:.1}**"));
                 let paper = match m {
-                    Method::Variant(v) => paper_cell(w, *v)
+                    Method::Variant(v) if !nav => paper_cell(w, *v)
                         .map_or(String::new(), |(a, b)| format!("<br>paper {a:.1} ± {b:.1}")),
-                    Method::Baseline(_) => String::new(),
+                    _ => String::new(),
                 };
                 let _ = write!(s, " {ours}{paper} |");
             }
@@ -330,8 +357,14 @@ impl Table2 {
         }
         let _ = writeln!(
             s,
-            "\nMean distance driven per episode (m): success counts episodes without a collision, so a \
-             policy that turns in place succeeds; this row tells it from one that drives.\n"
+            "{}",
+            if nav {
+                "\nMean distance driven per episode (m), every episode (the navigation table has \
+                 paths over the episodes that reached their goal).\n"
+            } else {
+                "\nMean distance driven per episode (m): success counts episodes without a collision, so a \
+                 policy that turns in place succeeds; this row tells it from one that drives.\n"
+            }
         );
         let _ = write!(s, "| world |");
         for m in &self.methods {
@@ -352,6 +385,80 @@ impl Table2 {
         }
         s
     }
+}
+
+/// The navigation results of a sweep: per method and world, over every seed's evaluation,
+/// success, collisions, timeouts, time, path and path ratio (from each evaluation's
+/// `navigation.csv`), and the evaluations missing or unreadable (their methods are left
+/// out).
+pub fn navigation_rows(plan: &Plan) -> (Vec<NavSummary>, Vec<String>) {
+    let sw = &plan.sweep;
+    let mut rows = Vec::new();
+    let mut missing = Vec::new();
+    for method in Method::all(plan) {
+        let mut records: Vec<(String, NavRecord)> = Vec::new();
+        let mut complete = true;
+        for id in method.eval_ids(plan) {
+            let Ok(job) = plan.job(&id) else { continue };
+            if plan.state(job) != JobState::Done {
+                missing.push(why_missing(plan, job));
+                complete = false;
+                continue;
+            }
+            let name = format!("{id}/navigation.csv");
+            let parsed = std::fs::read_to_string(plan.job_dir(job).join("navigation.csv"))
+                .map_err(|e| format!("{name}: {e}"))
+                .and_then(|text| parse_navigation_csv(&text, &name));
+            match parsed {
+                Ok(r) => records.extend(r),
+                Err(e) => {
+                    missing.push(format!("{id} unreadable: {e}"));
+                    complete = false;
+                }
+            }
+        }
+        if !complete {
+            continue;
+        }
+        for world in &sw.eval.worlds {
+            // A world file's rows are named by the world's name, not by its path.
+            let stem = std::path::Path::new(world)
+                .file_stem()
+                .map_or(world.clone(), |s| s.to_string_lossy().into_owned());
+            let navs: Vec<NavRecord> = records
+                .iter()
+                .filter(|(w, _)| w == world || *w == stem)
+                .map(|(_, r)| r.clone())
+                .collect();
+            if !navs.is_empty() {
+                rows.push(NavSummary::new(&method.name(), world, &navs));
+            }
+        }
+    }
+    (rows, missing)
+}
+
+/// `navigation.md` of a sweep ([`navigation_rows`] as a table, the missing said); `None`
+/// for an obstacle-avoidance sweep.
+pub fn navigation(plan: &Plan) -> Option<String> {
+    let sw = &plan.sweep;
+    if sw.task != Task::Nav {
+        return None;
+    }
+    let (rows, missing) = navigation_rows(plan);
+    let sim = mdrlat_sim::SimConfig::default();
+    let mut md = navigation_markdown(&rows, sw.eval.max_steps, &sim).replacen(
+        "# Navigation",
+        &format!("# Navigation — sweep `{}`", sw.name),
+        1,
+    );
+    if !missing.is_empty() {
+        md.push_str("\nMissing (not in the table):\n\n");
+        for m in missing {
+            let _ = writeln!(md, "- {m}");
+        }
+    }
+    Some(md)
 }
 
 /// One of the paper's claims about Table 2 and whether our numbers bear it out.
@@ -430,6 +537,57 @@ pub fn claims(t: &Table2) -> Vec<Claim> {
     out
 }
 
+/// The paper's claims about navigation (section 3.1): the goal-conditioned MDRLAT reaches
+/// every goal in the unseen world, on paths more tortuous than Move_Base's (`planner`):
+/// a larger ratio of path driven to the shortest path, over the goals reached.
+pub fn nav_claims(t: &Table2, rows: &[NavSummary]) -> Vec<Claim> {
+    let mut out = Vec::new();
+    let mdrlat = Method::Variant(Variant::Mdrlat);
+    let planner = Method::Baseline("planner".into());
+    let mut holds = Some(true);
+    let mut detail = Vec::new();
+    for w in &t.worlds {
+        match t.cell(w, &mdrlat).and_then(Cell::stats) {
+            Some((m, _)) => {
+                let ok = m >= 99.95;
+                holds = holds.map(|h| h && ok);
+                detail.push(format!("{w}: mdrlat {m:.1} % ({})", if ok { "yes" } else { "no" }));
+            }
+            None => holds = None,
+        }
+    }
+    out.push(Claim {
+        claim: "MDRLAT reaches every goal in the unseen world",
+        holds,
+        detail: detail.join("; "),
+    });
+    let mut holds = Some(true);
+    let mut detail = Vec::new();
+    for w in &t.worlds {
+        let ratio = |m: &Method| {
+            rows.iter()
+                .find(|r| r.world == *w && r.eval == m.name())
+                .and_then(|r| r.path_ratio_mean)
+        };
+        match (ratio(&mdrlat), ratio(&planner)) {
+            (Some(a), Some(b)) => {
+                holds = holds.map(|h| h && a > b);
+                detail.push(format!(
+                    "{w}: path / shortest mdrlat {a:.2} vs planner {b:.2} ({})",
+                    if a > b { "yes" } else { "no" }
+                ));
+            }
+            _ => holds = None,
+        }
+    }
+    out.push(Claim {
+        claim: "MDRLAT's trajectories are more tortuous than the planner's",
+        holds,
+        detail: detail.join("; "),
+    });
+    out
+}
+
 /// `report.md`: what was run, Table 2, the paper's claims checked, and links to the figures.
 pub fn report(plan: &Plan, t: &Table2) -> String {
     let sw = &plan.sweep;
@@ -438,7 +596,8 @@ pub fn report(plan: &Plan, t: &Table2) -> String {
     let _ = writeln!(s, "{}\n", sw.description);
     let _ = writeln!(
         s,
-        "- Training: {} variant(s) × {} seed(s) × {} steps in `{}` on `{}`{}.",
+        "- Training{}: {} variant(s) × {} seed(s) × {} steps in `{}` on `{}`{}.",
+        if sw.task == Task::Nav { " (navigation: goal-conditioned networks)" } else { "" },
         sw.variants.len(),
         sw.seeds.len(),
         sw.steps,
@@ -456,13 +615,59 @@ pub fn report(plan: &Plan, t: &Table2) -> String {
         sw.eval.seed,
         if sw.eval.baselines.is_empty() { "none".into() } else { sw.eval.baselines.join(", ") }
     );
-    if sw.steps < 400_000 {
+    if sw.task == Task::Avoid && sw.steps < 400_000 {
         let _ = writeln!(
             s,
             "- **{} steps is {:.1} % of the paper's 400,000**: compare orderings with care, not absolute rates.",
             sw.steps,
             100.0 * sw.steps as f64 / 400_000.0
         );
+    }
+    let nav = sw.task == Task::Nav;
+    if nav {
+        let _ = writeln!(
+            s,
+            "\n[Success table](table2.md) · [CSV](table2.csv) · [Navigation](navigation.md) · [Fig. 4](fig4.png)\n"
+        );
+        s.push_str(&t.markdown(plan).replacen("# Navigation", "## Navigation", 1));
+        let (rows, _) = navigation_rows(plan);
+        if let Some(md) = navigation(plan) {
+            let body = md.split_once("\n\n").map_or(md.as_str(), |(_, rest)| rest);
+            let _ = writeln!(s, "\n## Time, path and path ratio\n\n{body}");
+        }
+        let _ = writeln!(s, "\n## Does the paper's navigation result hold here?\n");
+        for c in nav_claims(t, &rows) {
+            let verdict = match c.holds {
+                Some(true) => "**holds**",
+                Some(false) => "**does not hold**",
+                None => "cannot be checked (methods or results missing)",
+            };
+            let _ = writeln!(s, "- {}: {verdict}. {}", c.claim, c.detail);
+        }
+        let _ =
+            writeln!(s, "\n## Figures\n\n![Fig. 4: evaluation reward during training](fig4.png)\n");
+        for job in plan.eval_jobs() {
+            let drawn = match job.kind {
+                JobKind::EvalModel { figures, .. } | JobKind::EvalBaseline { figures, .. } => {
+                    figures > 0
+                }
+                _ => false,
+            };
+            for w in sw.eval.worlds.iter().filter(|_| drawn) {
+                let stem = std::path::Path::new(w)
+                    .file_stem()
+                    .map_or(w.clone(), |s| s.to_string_lossy().into_owned());
+                let png = format!("figures/{stem}-fig9.png");
+                if plan.job_dir(job).join(&png).is_file() {
+                    let _ = writeln!(
+                        s,
+                        "Fig. 9, `{}` in {w}:\n\n![{}]({}/{png})\n",
+                        job.id, job.id, job.id
+                    );
+                }
+            }
+        }
+        return s;
     }
     let _ = writeln!(s, "\n[Table 2](table2.md) · [CSV](table2.csv) · [Fig. 4](fig4.png)\n");
     s.push_str(&t.markdown(plan).replacen("# Table 2", "## Table 2", 1));
@@ -522,12 +727,16 @@ pub fn report(plan: &Plan, t: &Table2) -> String {
     s
 }
 
-/// Writes `table2.csv`, `table2.md` and `report.md` into the sweep's folder; returns the
-/// table (the caller fails the job when it is incomplete, after writing it).
+/// Writes `table2.csv`, `table2.md`, `navigation.md` (navigation sweeps) and `report.md`
+/// into the sweep's folder; returns the table (the caller fails the job when it is
+/// incomplete, after writing it).
 pub fn write(plan: &Plan) -> Result<Table2, SweepError> {
     let t = Table2::gather(plan)?;
     write_atomic(&plan.dir.join("table2.csv"), t.csv().as_bytes())?;
     write_atomic(&plan.dir.join("table2.md"), t.markdown(plan).as_bytes())?;
+    if let Some(md) = navigation(plan) {
+        write_atomic(&plan.dir.join("navigation.md"), md.as_bytes())?;
+    }
     write_atomic(&plan.dir.join("report.md"), report(plan, &t).as_bytes())?;
     Ok(t)
 }
@@ -551,7 +760,7 @@ mod tests {
                 missing: Vec::new(),
             })
             .collect();
-        Table2 { cells, methods, worlds }
+        Table2 { cells, methods, worlds, task: Task::Avoid }
     }
 
     #[test]

@@ -7,6 +7,7 @@ use crate::replay::{Batch, ReplayBuffer, Transition};
 use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Rng};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
+use mdrlat_sim::config::Task;
 use std::time::{Duration, Instant};
 
 /// A random batch in the network's input layout (values in the normalised ranges).
@@ -25,6 +26,8 @@ pub fn random_batch(variant: Variant, size: usize, seed: u64) -> Batch {
         rewards: fill(size),
         terminated: (0..size).map(|i| (i % 7 == 0) as u8 as f32).collect(),
         odom: fill(size * 6),
+        goal: Vec::new(),
+        next_goal: Vec::new(),
     }
 }
 
@@ -59,7 +62,7 @@ pub fn update_ms(
     min_time: Duration,
 ) -> (f64, usize) {
     let config = TrainConfig { variant, batch_size: batch, ..TrainConfig::default() };
-    let mut learner = Learner::new(&config, device);
+    let mut learner = Learner::new(&config, Task::Avoid, device);
     learner.set_host_kernels(host_kernels);
     let b = random_batch(variant, batch, 1);
     median_ms(min_time, || {
@@ -86,9 +89,9 @@ pub fn infer_ms(
     threads: usize,
 ) -> (f64, usize) {
     let config = TrainConfig { variant, ..TrainConfig::default() };
-    let learner = Learner::new(&config, device);
+    let learner = Learner::new(&config, Task::Avoid, device);
     let b = random_batch(variant, 1, 2);
-    let inputs = Inputs { size: 1, laser: b.laser, depth: b.depth };
+    let inputs = Inputs { size: 1, laser: b.laser, depth: b.depth, goal: Vec::new() };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.max(1))
         .build()
@@ -111,12 +114,12 @@ pub fn decision_ms(
     bf16: bool,
     min_time: Duration,
 ) -> Result<(f64, usize), String> {
-    let mut policy = crate::GreedyPolicy::untrained(variant, 0, &Device::flex(), 1)?;
+    let mut policy = crate::GreedyPolicy::untrained(variant, Task::Avoid, 0, &Device::flex(), 1)?;
     if bf16 {
         policy = policy.with_bf16_weights()?;
     }
     let b = random_batch(variant, 1, 2);
-    let inputs = Inputs { size: 1, laser: b.laser, depth: b.depth };
+    let inputs = Inputs { size: 1, laser: b.laser, depth: b.depth, goal: Vec::new() };
     Ok(median_ms(min_time, || {
         let _ = policy.q_values(&inputs);
     }))
@@ -138,7 +141,7 @@ pub fn policy_batch_ms(
     min_time: Duration,
 ) -> (f64, f64) {
     use mdrlat_core::{Observation, Policy};
-    let mut policy = crate::GreedyPolicy::untrained(variant, 0, device, threads)
+    let mut policy = crate::GreedyPolicy::untrained(variant, Task::Avoid, 0, device, threads)
         .expect("inference thread pool")
         .with_forward_batch(forward_batch);
     let mut rng = Rng::seed_from_u64(6);
@@ -226,6 +229,8 @@ pub fn sample_ms(variant: Variant, batch: usize, min_time: Duration) -> f64 {
             reward: 0.0,
             terminated: false,
             odom: [0.0; 2 * mdrlat_core::ODOM_HISTORY],
+            goal: [0.0; 3],
+            next_goal: [0.0; 3],
         };
         replay.push(t);
     }
@@ -248,7 +253,7 @@ pub fn profile(
     min_time: Duration,
 ) -> Vec<(String, f64)> {
     let config = TrainConfig { variant, batch_size: batch, ..TrainConfig::default() };
-    let mut learner = Learner::new(&config, device);
+    let mut learner = Learner::new(&config, Task::Avoid, device);
     let b = random_batch(variant, batch, 3);
     // Per stage: forward and backward samples.
     let mut stages: Vec<(&'static str, Vec<f64>, Vec<f64>)> = Vec::new();

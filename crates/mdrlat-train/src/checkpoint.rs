@@ -18,6 +18,7 @@ use mdrlat_core::Rng;
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::EnvState;
+use mdrlat_sim::config::Task;
 use serde::{Deserialize, Serialize};
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -61,6 +62,9 @@ pub struct Meta {
     pub mdrlat_version: String,
     /// Network variant.
     pub variant: Variant,
+    /// The task it learns (`avoid` in checkpoints written before navigation existed).
+    #[serde(default)]
+    pub task: Task,
     /// Environment steps done.
     pub step: u64,
     /// Gradient steps done.
@@ -196,14 +200,15 @@ pub fn read_meta(dir: &Path) -> Result<Meta, TrainError> {
     Ok(meta)
 }
 
-/// Reads the checkpoint of `run_dir` for a run with `config`.
+/// Reads the checkpoint of `run_dir` for a run with `config` of `task`.
 ///
 /// # Errors
 /// No checkpoint, a truncated or corrupt file, another format version, or a checkpoint of
-/// another variant or replay size.
+/// another variant, task or replay size.
 pub fn load(
     run_dir: &Path,
     config: &TrainConfig,
+    task: Task,
     device: &Device,
 ) -> Result<(Meta, Learner, ReplayBuffer), TrainError> {
     let mut dir = folder(run_dir);
@@ -224,7 +229,18 @@ pub fn load(
             ),
         ));
     }
-    let learner = Learner::load(config, device, &dir, meta.updates).map_err(|e| bad(&dir, e))?;
+    if meta.task != task {
+        return Err(bad(
+            &meta_path,
+            format!(
+                "the checkpoint learns the {} task; the run asks for --task {task} \
+                 (sim.task)",
+                meta.task
+            ),
+        ));
+    }
+    let learner =
+        Learner::load(config, task, device, &dir, meta.updates).map_err(|e| bad(&dir, e))?;
     let replay_path = dir.join("replay.bin");
     let file = File::open(&replay_path).map_err(|e| bad(&replay_path, e.to_string()))?;
     let size = file.metadata().map(|m| m.len()).unwrap_or(0);
@@ -243,6 +259,7 @@ pub fn load(
         frame_reserve(cap),
         v.uses_laser(),
         v.uses_depth(),
+        task == Task::Nav,
     )
     .map_err(|e| bad(&replay_path, e.to_string()))?;
     if r.hash != meta.replay_checksum {

@@ -15,6 +15,7 @@ use mdrlat_nn::burn::store::{
 };
 use mdrlat_nn::burn::tensor::DType;
 use mdrlat_nn::{QNet, QNetConfig, Variant};
+use mdrlat_sim::config::Task;
 use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::Path;
@@ -32,18 +33,19 @@ pub enum Precision {
 ///
 /// # Errors
 /// The file cannot be written.
-pub fn save_safetensors(net: &QNet, variant: Variant, path: &Path) -> Result<(), String> {
-    save_safetensors_as(net, variant, path, Precision::F32, &[])
+pub fn save_safetensors(net: &QNet, config: &QNetConfig, path: &Path) -> Result<(), String> {
+    save_safetensors_as(net, config, path, Precision::F32, &[])
 }
 
 /// Writes `net` to `path` in safetensors format in `precision`, with `extra` metadata
-/// (e.g. `mdrlat_step`) beside the variant and the input layout.
+/// (e.g. `mdrlat_step`) beside the variant and the input layout. A navigation network
+/// also records `mdrlat_task = nav` (an obstacle-avoidance model's file is as before).
 ///
 /// # Errors
 /// The file cannot be written.
 pub fn save_safetensors_as(
     net: &QNet,
-    variant: Variant,
+    config: &QNetConfig,
     path: &Path,
     precision: Precision,
     extra: &[(&str, String)],
@@ -55,16 +57,22 @@ pub fn save_safetensors_as(
             store.with_to_adapter(BurnToPyTorchAdapter.chain(FloatCastAdapter::to(DType::F16)))
         }
     };
-    let mut store = store
-        .metadata("mdrlat_variant", variant.name())
-        .metadata(
-            "mdrlat_inputs",
-            "laser [B,4,512] range/5.6; depth [B,4,128,160] clamp(0,10)/5; NCHW",
-        )
-        .metadata(
-            "mdrlat_outputs",
-            "q [B,10] (Table 1 actions); velocity [B,6] (v,w at t-2,t-1,t)",
-        );
+    let inputs = "laser [B,4,512] range/5.6; depth [B,4,128,160] clamp(0,10)/5; NCHW";
+    let mut store = store.metadata("mdrlat_variant", config.variant.name()).metadata(
+        "mdrlat_inputs",
+        if config.goal_dim > 0 {
+            format!("{inputs}; goal [B,3] (distance/10 m, sin, cos of the bearing)")
+        } else {
+            inputs.to_string()
+        },
+    );
+    if config.goal_dim > 0 {
+        store = store.metadata("mdrlat_task", "nav");
+    }
+    let mut store = store.metadata(
+        "mdrlat_outputs",
+        "q [B,10] (Table 1 actions); velocity [B,6] (v,w at t-2,t-1,t)",
+    );
     for (k, v) in extra {
         store = store.metadata(*k, v.clone());
     }
@@ -100,15 +108,16 @@ pub fn safetensors_metadata(path: &Path) -> Result<BTreeMap<String, String>, Str
 }
 
 /// Reads a model file written by [`save_safetensors_as`] (f32 or f16; computed in f32) into
-/// a fresh network of the variant its metadata names; returns the variant, the network and
-/// the metadata.
+/// a fresh network of the variant and task its metadata names; returns the network's
+/// settings, the network and the metadata.
 ///
 /// # Errors
-/// Not a safetensors file, no or an unknown `mdrlat_variant`, or tensors that do not fit it.
+/// Not a safetensors file, no or an unknown `mdrlat_variant` or `mdrlat_task`, or tensors
+/// that do not fit it.
 pub fn load_safetensors(
     path: &Path,
     device: &Device,
-) -> Result<(Variant, QNet, BTreeMap<String, String>), String> {
+) -> Result<(QNetConfig, QNet, BTreeMap<String, String>), String> {
     let meta = safetensors_metadata(path)?;
     let variant: Variant = meta
         .get("mdrlat_variant")
@@ -117,11 +126,16 @@ pub fn load_safetensors(
         })?
         .parse()
         .map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut net = QNetConfig::new(variant).init(device);
+    let task: Task = match meta.get("mdrlat_task") {
+        None => Task::Avoid,
+        Some(t) => t.parse().map_err(|e| format!("{}: mdrlat_task: {e}", path.display()))?,
+    };
+    let config = crate::learner::net_config(variant, task);
+    let mut net = config.init(device);
     let mut store = SafetensorsStore::from_file(path)
         .with_from_adapter(PyTorchToBurnAdapter.chain(FloatCastAdapter::to(DType::F32)));
     crate::learner::load_all(&mut net, &mut store, path, variant)?;
-    Ok((variant, net, meta))
+    Ok((config, net, meta))
 }
 
 /// How far two networks' Q-values lie apart on the same observations (a model stored in f16
@@ -176,8 +190,8 @@ pub fn compare_q(
     let (mut ia, mut ib) = (crate::Inputs::default(), crate::Inputs::default());
     for chunk in observations.chunks(64) {
         let refs: Vec<&mdrlat_core::Observation> = chunk.iter().collect();
-        crate::observation_inputs(&refs, a.variant(), &mut ia);
-        crate::observation_inputs(&refs, b.variant(), &mut ib);
+        crate::observation_inputs(&refs, a.config(), &mut ia)?;
+        crate::observation_inputs(&refs, b.config(), &mut ib)?;
         let (qa, qb) = (a.q_values(&ia)?, b.q_values(&ib)?);
         let (mut ga, mut gb) = (Vec::new(), Vec::new());
         mdrlat_core::greedy_actions(&qa, chunk.len(), &mut ga)?;

@@ -14,6 +14,7 @@ use mdrlat_nn::burn::prelude::*;
 use mdrlat_nn::burn::store::{BurnpackStore, ModuleSnapshot};
 use mdrlat_nn::host::{HostGrad, HostInputs, HostNet};
 use mdrlat_nn::{QNet, QNetConfig, Variant};
+use mdrlat_sim::config::Task;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -37,20 +38,25 @@ pub struct Inputs {
     pub laser: Vec<f32>,
     /// `[B, 4, 128, 160]` normalised depth (empty when unused).
     pub depth: Vec<f32>,
+    /// `[B, 3]` normalised goal (`mdrlat_core::normalize_goal`; empty without a goal input).
+    pub goal: Vec<f32>,
 }
 
 impl Inputs {
     /// The same rows for the host kernels.
     pub(crate) fn host(&self) -> HostInputs<'_> {
-        HostInputs { batch: self.size, laser: &self.laser, depth: &self.depth, goal: &[] }
+        HostInputs { batch: self.size, laser: &self.laser, depth: &self.depth, goal: &self.goal }
     }
 }
 
 /// The observations `s` (`next`: `s'`) of a batch for the host kernels.
 fn batch_inputs(batch: &Batch, next: bool) -> HostInputs<'_> {
-    let (laser, depth) =
-        if next { (&batch.next_laser, &batch.next_depth) } else { (&batch.laser, &batch.depth) };
-    HostInputs { batch: batch.size, laser, depth, goal: &[] }
+    let (laser, depth, goal) = if next {
+        (&batch.next_laser, &batch.next_depth, &batch.next_goal)
+    } else {
+        (&batch.laser, &batch.depth, &batch.goal)
+    };
+    HostInputs { batch: batch.size, laser, depth, goal }
 }
 
 /// Eq. (10) on host rows: `y = r + (1 − terminated) · Q⁻(s', argmax_a' Q(s', a')) · γ`, in
@@ -70,6 +76,8 @@ fn host_targets(online_next: &[f32], target_next: &[f32], batch: &Batch, gamma: 
 /// The online network, its target copy and the optimiser.
 pub struct Learner {
     variant: Variant,
+    /// The network's settings: the variant and, for navigation, the goal input.
+    net_config: QNetConfig,
     /// Device with autodiff, where the online network trains.
     train_device: Device,
     /// The same device without autodiff, for targets and acting.
@@ -117,18 +125,23 @@ pub(crate) fn tensor4(data: &[f32], b: usize, device: &Device) -> mdrlat_nn::Dep
     mdrlat_nn::depth_input(data, b, DEPTH_ROWS, DEPTH_COLS, device)
 }
 
-/// Q-values `[B][actions]` (row-major) of `net`, a `variant` network without autodiff on
+/// Q-values `[B][actions]` (row-major) of `net`, a network of `config` without autodiff on
 /// `device`, for a batch of network inputs: the one forward every greedy decision uses.
 ///
 /// # Errors
 /// Inputs of the wrong size for the batch, or a backend failure.
 pub(crate) fn q_forward(
     net: &QNet,
-    variant: Variant,
+    config: &QNetConfig,
     device: &Device,
     inputs: &Inputs,
 ) -> Result<Vec<f32>, PolicyError> {
-    q_forward_with(net, None, variant, device, inputs)
+    q_forward_with(net, None, config, device, inputs)
+}
+
+/// The goal stacks `[B, goal_dim]` as a tensor (`None` without a goal input).
+fn goal_tensor(goal: &[f32], b: usize, goal_dim: usize, device: &Device) -> Option<Tensor<2>> {
+    (goal_dim > 0).then(|| Tensor::from_data(TensorData::new(goal.to_vec(), [b, goal_dim]), device))
 }
 
 /// [`q_forward`], through `host` when given (a host network prepared once, e.g. with
@@ -136,11 +149,11 @@ pub(crate) fn q_forward(
 pub(crate) fn q_forward_with(
     net: &QNet,
     host: Option<&HostNet>,
-    variant: Variant,
+    config: &QNetConfig,
     device: &Device,
     inputs: &Inputs,
 ) -> Result<Vec<f32>, PolicyError> {
-    let b = inputs.size;
+    let (b, variant) = (inputs.size, config.variant);
     if variant.uses_laser() && inputs.laser.len() != b * FRAME_STACK * LASER_BEAMS {
         return Err(PolicyError::Backend(format!(
             "laser input has {} values, expected {b} x 4 x 512",
@@ -153,18 +166,26 @@ pub(crate) fn q_forward_with(
             inputs.depth.len()
         )));
     }
+    if inputs.goal.len() != b * config.goal_dim {
+        return Err(PolicyError::Backend(format!(
+            "goal input has {} values, expected {b} x {}",
+            inputs.goal.len(),
+            config.goal_dim
+        )));
+    }
     if b == 0 {
         return Ok(Vec::new());
     }
     if let Some(host) = host {
         return Ok(host.q_values(&inputs.host()));
     }
-    if let Some(host) = net.host(&QNetConfig::new(variant)) {
+    if let Some(host) = net.host(config) {
         return Ok(host.q_values(&inputs.host()));
     }
     let l = variant.uses_laser().then(|| tensor3(&inputs.laser, b, device));
     let d = variant.uses_depth().then(|| tensor4(&inputs.depth, b, device));
-    let q = net.q_values(l, d, None);
+    let g = goal_tensor(&inputs.goal, b, config.goal_dim, device);
+    let q = net.q_values(l, d, g);
     q.into_data()
         .try_to_vec::<f32>()
         .map_err(|e| PolicyError::Backend(format!("reading Q-values: {e:?}")))
@@ -180,6 +201,11 @@ pub fn read_net(net: &mut QNet, path: &Path, variant: Variant) -> Result<(), Str
     }
     let mut store = BurnpackStore::from_file(path).auto_extension(false);
     load_all(net, &mut store, path, variant)
+}
+
+/// The settings of a `variant` network for `task` (a goal input for navigation).
+pub fn net_config(variant: Variant, task: Task) -> QNetConfig {
+    QNetConfig::new(variant).with_goal_dim(task.goal_dim())
 }
 
 /// Loads every tensor of `store` into `net`; a file that does not fit the variant exactly
@@ -234,13 +260,14 @@ fn register(grads: &mut GradientsParams, g: HostGrad, device: &Device) {
 }
 
 impl Learner {
-    /// A fresh learner: the network is initialised from `seed` on `device`, the target is a
-    /// copy (Algorithm 1, line 1).
-    pub fn new(config: &TrainConfig, device: &Device) -> Self {
+    /// A fresh learner of `task` (navigation adds the goal input): the network is
+    /// initialised from `seed` on `device`, the target is a copy (Algorithm 1, line 1).
+    pub fn new(config: &TrainConfig, task: Task, device: &Device) -> Self {
         let device = device.clone();
         let side_by_side = mdrlat_nn::is_flex(&device);
         let train_device = device.clone().autodiff();
-        let online = QNetConfig::new(config.variant).init_seeded(&train_device, config.seed);
+        let net_config = net_config(config.variant, task);
+        let online = net_config.init_seeded(&train_device, config.seed);
         let target = online.valid();
         let plain = online.valid();
         let adam = FusedAdam::new(config.adam_epsilon);
@@ -248,6 +275,7 @@ impl Learner {
         let optim = adam.into_module_optimizer();
         Self {
             variant: config.variant,
+            net_config,
             train_device,
             device,
             online,
@@ -270,28 +298,45 @@ impl Learner {
         self.variant
     }
 
+    /// The task it learns: navigation when the network reads a goal.
+    pub fn task(&self) -> Task {
+        if self.net_config.goal_dim > 0 { Task::Nav } else { Task::Avoid }
+    }
+
+    /// The network's settings.
+    pub fn net_config(&self) -> &QNetConfig {
+        &self.net_config
+    }
+
     /// Gradient steps taken.
     pub fn updates(&self) -> u64 {
         self.updates
     }
 
+    /// A batch's `s` (`next`: `s'`) as the network's input tensors.
     fn inputs<const AD: bool>(
         &self,
-        laser: &[f32],
-        depth: &[f32],
-        b: usize,
-    ) -> (Option<Tensor<3>>, Option<mdrlat_nn::DepthInput>) {
+        batch: &Batch,
+        next: bool,
+    ) -> (Option<Tensor<3>>, Option<mdrlat_nn::DepthInput>, Option<Tensor<2>>) {
         let dev = if AD { &self.train_device } else { &self.device };
+        let (laser, depth, goal) = if next {
+            (&batch.next_laser, &batch.next_depth, &batch.next_goal)
+        } else {
+            (&batch.laser, &batch.depth, &batch.goal)
+        };
+        let b = batch.size;
         (
             self.variant.uses_laser().then(|| tensor3(laser, b, dev)),
             self.variant.uses_depth().then(|| tensor4(depth, b, dev)),
+            goal_tensor(goal, b, self.net_config.goal_dim, dev),
         )
     }
 
     /// Q-values of the online network for a batch of network inputs, `[B][actions]`
     /// row-major (empty if the backend failed).
     pub fn q_values(&self, inputs: &Inputs) -> Vec<f32> {
-        q_forward(&self.plain, self.variant, &self.device, inputs).unwrap_or_default()
+        q_forward(&self.plain, &self.net_config, &self.device, inputs).unwrap_or_default()
     }
 
     /// The greedy action of each row of `inputs` (Algorithm 1, line 3, without
@@ -300,7 +345,7 @@ impl Learner {
     /// # Errors
     /// A non-finite Q-value (the network diverged), or a backend failure.
     pub fn greedy(&self, inputs: &Inputs) -> Result<Vec<Action>, PolicyError> {
-        let q = q_forward(&self.plain, self.variant, &self.device, inputs)?;
+        let q = q_forward(&self.plain, &self.net_config, &self.device, inputs)?;
         let mut out = Vec::with_capacity(inputs.size);
         greedy_actions(&q, inputs.size, &mut out)?;
         Ok(out)
@@ -314,7 +359,7 @@ impl Learner {
     /// The thread pool cannot start.
     pub fn greedy_policy(&self, threads: usize) -> Result<crate::GreedyPolicy, String> {
         crate::GreedyPolicy::from_net(
-            self.variant,
+            self.net_config.clone(),
             self.plain.clone(),
             &self.device,
             threads,
@@ -329,10 +374,10 @@ impl Learner {
     /// `[B, 1]`, on the plain device.
     fn targets(&self, batch: &Batch) -> Tensor<2> {
         let b = batch.size;
-        let (nl, nd) = self.inputs::<false>(&batch.next_laser, &batch.next_depth, b);
+        let (nl, nd, ng) = self.inputs::<false>(batch, true);
         let (online_next, target_next) = self.both(
-            || self.plain.q_values(nl.clone(), nd.clone(), None),
-            || self.target.q_values(nl.clone(), nd.clone(), None),
+            || self.plain.q_values(nl.clone(), nd.clone(), ng.clone()),
+            || self.target.q_values(nl.clone(), nd.clone(), ng.clone()),
         );
         let best_next = online_next.argmax(1); // [B, 1]
         let q_next = target_next.gather(1, best_next); // [B, 1]
@@ -360,8 +405,8 @@ impl Learner {
         if !self.host_kernels {
             return None;
         }
-        let config = QNetConfig::new(self.variant);
-        Some((self.plain.host(&config)?, self.target.host(&config)?))
+        let config = &self.net_config;
+        Some((self.plain.host(config)?, self.target.host(config)?))
     }
 
     /// Whether gradient steps run on the host kernels (`mdrlat_nn::host`): on `flex`, unless
@@ -381,8 +426,8 @@ impl Learner {
         if let Some((_, target)) = self.host_nets() {
             return target.q_values(&batch_inputs(batch, true));
         }
-        let (nl, nd) = self.inputs::<false>(&batch.next_laser, &batch.next_depth, batch.size);
-        self.target.q_values(nl, nd, None).into_data().try_to_vec::<f32>().unwrap_or_default()
+        let (nl, nd, ng) = self.inputs::<false>(batch, true);
+        self.target.q_values(nl, nd, ng).into_data().try_to_vec::<f32>().unwrap_or_default()
     }
 
     /// Runs two independent computations, side by side where that pays (see
@@ -401,8 +446,8 @@ impl Learner {
         self.both(
             || self.targets(batch),
             || {
-                let (l, d) = self.inputs::<true>(&batch.laser, &batch.depth, batch.size);
-                self.online.forward(l, d, None)
+                let (l, d, g) = self.inputs::<true>(batch, false);
+                self.online.forward(l, d, g)
             },
         )
     }
@@ -554,21 +599,23 @@ impl Learner {
         in_name_order(&optimizer).map_err(|e| format!("optimizer.bpk: {e}"))
     }
 
-    /// A learner restored from [`Learner::save`] files, `updates` gradient steps in.
+    /// A learner of `task` restored from [`Learner::save`] files, `updates` gradient steps
+    /// in.
     ///
     /// # Errors
-    /// A missing, truncated or foreign file, or weights of another variant.
+    /// A missing, truncated or foreign file, or weights of another variant or task.
     pub fn load(
         config: &TrainConfig,
+        task: Task,
         device: &Device,
         dir: &Path,
         updates: u64,
     ) -> Result<Self, String> {
-        let mut learner = Learner::new(config, device);
+        let mut learner = Learner::new(config, task, device);
         let read = |net: &mut QNet, name: &str| read_net(net, &dir.join(name), config.variant);
         read(&mut learner.online, "online.bpk")?;
         learner.plain = learner.online.valid();
-        let mut target = QNetConfig::new(config.variant).init(&learner.device);
+        let mut target = learner.net_config.init(&learner.device);
         read(&mut target, "target.bpk")?;
         learner.target = target;
         let path = dir.join("optimizer.bpk");
@@ -586,7 +633,7 @@ impl Learner {
     /// Forward and backward times of each stage of the online network on `batch`
     /// (with autodiff, as in a gradient step), milliseconds.
     pub fn stage_times(&self, batch: &Batch) -> Vec<mdrlat_nn::StageTime> {
-        let (l, d) = self.inputs::<true>(&batch.laser, &batch.depth, batch.size);
+        let (l, d, _) = self.inputs::<true>(batch, false);
         self.online.stage_times(l, d, true)
     }
 

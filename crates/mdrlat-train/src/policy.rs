@@ -4,18 +4,20 @@
 //! and the ROS node call.
 
 use crate::checkpoint::read_meta;
-use crate::learner::{Inputs, q_forward_with, read_net};
+use crate::learner::{Inputs, net_config, q_forward_with, read_net};
 use mdrlat_core::{
     Action, FRAME_STACK, Observation, Policy, PolicyError, Sensors, catch_panic, check_batch,
-    greedy_actions, normalize_depth, normalize_laser,
+    greedy_actions, normalize_depth, normalize_goal, normalize_laser,
 };
 use mdrlat_nn::burn::prelude::*;
 use mdrlat_nn::{QNet, QNetConfig, Variant};
+use mdrlat_sim::config::Task;
 use std::path::{Path, PathBuf};
 
 /// A Q-network acting greedily (no exploration) on batches of observations.
 pub struct GreedyPolicy {
-    variant: Variant,
+    /// The network's settings: variant and goal input.
+    config: QNetConfig,
     net: QNet,
     device: Device,
     pool: rayon::ThreadPool,
@@ -31,7 +33,8 @@ pub struct GreedyPolicy {
 impl std::fmt::Debug for GreedyPolicy {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("GreedyPolicy")
-            .field("variant", &self.variant)
+            .field("variant", &self.config.variant)
+            .field("goal_dim", &self.config.goal_dim)
             .field("source", &self.source)
             .finish()
     }
@@ -73,9 +76,18 @@ fn pool(threads: usize) -> Result<rayon::ThreadPool, String> {
         .map_err(|e| format!("inference thread pool: {e}"))
 }
 
-/// Writes the network inputs of `batch` for `variant` into `inputs` (one row per
-/// observation, oldest frame first) through the shared normalisation of `mdrlat_core`.
-pub fn observation_inputs(batch: &[&Observation], variant: Variant, inputs: &mut Inputs) {
+/// Writes the network inputs of `batch` for a network of `config` into `inputs` (one row
+/// per observation, oldest frame first) through the shared normalisation of `mdrlat_core`.
+///
+/// # Errors
+/// The network reads a goal and an observation has none (it comes from obstacle avoidance,
+/// not the navigation task).
+pub fn observation_inputs(
+    batch: &[&Observation],
+    config: &QNetConfig,
+    inputs: &mut Inputs,
+) -> Result<(), PolicyError> {
+    let variant = config.variant;
     inputs.size = batch.len();
     let fill = |out: &mut Vec<f32>,
                 stack: fn(&Observation) -> &mdrlat_core::FrameStack,
@@ -100,6 +112,19 @@ pub fn observation_inputs(batch: &[&Observation], variant: Variant, inputs: &mut
     } else {
         inputs.depth.clear();
     }
+    inputs.goal.clear();
+    if config.goal_dim > 0 {
+        for (row, obs) in batch.iter().enumerate() {
+            let goal = obs.goal.ok_or_else(|| {
+                PolicyError::Backend(format!(
+                    "observation {row} has no goal, but this network was trained for \
+                     navigation (run it with --task nav)"
+                ))
+            })?;
+            inputs.goal.extend_from_slice(&normalize_goal(&goal));
+        }
+    }
+    Ok(())
 }
 
 impl GreedyPolicy {
@@ -113,10 +138,10 @@ impl GreedyPolicy {
     /// do not fit the variant it names.
     pub fn load(path: &Path, device: &Device, threads: usize) -> Result<Self, String> {
         if let Some(model) = model_file(path) {
-            let (variant, net, meta) = crate::export::load_safetensors(&model, device)?;
+            let (config, net, meta) = crate::export::load_safetensors(&model, device)?;
             let step = meta.get("mdrlat_step").map_or(String::new(), |s| format!(" (step {s})"));
             return Self::from_net(
-                variant,
+                config,
                 net,
                 device,
                 threads,
@@ -125,10 +150,11 @@ impl GreedyPolicy {
         }
         let dir = checkpoint_dir(path)?;
         let meta = read_meta(&dir).map_err(|e| e.to_string())?;
-        let mut net = QNetConfig::new(meta.variant).init(device);
+        let config = net_config(meta.variant, meta.task);
+        let mut net = config.init(device);
         read_net(&mut net, &dir.join("online.bpk"), meta.variant)?;
         Self::from_net(
-            meta.variant,
+            config,
             net,
             device,
             threads,
@@ -136,35 +162,37 @@ impl GreedyPolicy {
         )
     }
 
-    /// A freshly initialised `variant` network (seeded), for testing a deployment before
-    /// any training.
+    /// A freshly initialised `variant` network of `task` (seeded), for testing a deployment
+    /// before any training.
     ///
     /// # Errors
     /// The thread pool cannot start.
     pub fn untrained(
         variant: Variant,
+        task: Task,
         seed: u64,
         device: &Device,
         threads: usize,
     ) -> Result<Self, String> {
-        let net = QNetConfig::new(variant).init_seeded(device, seed);
-        Self::from_net(variant, net, device, threads, format!("untrained, seed {seed}"))
+        let config = net_config(variant, task);
+        let net = config.init_seeded(device, seed);
+        Self::from_net(config, net, device, threads, format!("untrained, seed {seed}"))
     }
 
-    /// A policy over `net`, a `variant` network without autodiff on `device`; `source`
+    /// A policy over `net`, a network of `config` without autodiff on `device`; `source`
     /// says where its weights came from.
     ///
     /// # Errors
     /// The thread pool cannot start.
     pub fn from_net(
-        variant: Variant,
+        config: QNetConfig,
         net: QNet,
         device: &Device,
         threads: usize,
         source: String,
     ) -> Result<Self, String> {
         Ok(Self {
-            variant,
+            config,
             net,
             device: device.clone(),
             pool: pool(threads)?,
@@ -203,7 +231,7 @@ impl GreedyPolicy {
     pub fn with_bf16_weights(mut self) -> Result<Self, String> {
         let host = self
             .net
-            .host(&QNetConfig::new(self.variant))
+            .host(&self.config)
             .ok_or("bfloat16 weights need the cpu device (the host kernels)")?;
         self.bf16 =
             Some(host.with_bf16_weights().ok_or(
@@ -215,7 +243,37 @@ impl GreedyPolicy {
 
     /// The variant.
     pub fn variant(&self) -> Variant {
-        self.variant
+        self.config.variant
+    }
+
+    /// The task it was trained for: navigation when the network reads a goal.
+    pub fn task(&self) -> Task {
+        if self.config.goal_dim > 0 { Task::Nav } else { Task::Avoid }
+    }
+
+    /// The network's settings.
+    pub fn config(&self) -> &QNetConfig {
+        &self.config
+    }
+
+    /// An error unless the network was trained for `task` (a navigation network needs the
+    /// goal, an obstacle-avoidance one has never seen it); `what` names the network.
+    ///
+    /// # Errors
+    /// The tasks differ.
+    pub fn check_task(&self, task: Task, what: &str) -> Result<(), String> {
+        if self.task() == task {
+            return Ok(());
+        }
+        let trained = match self.task() {
+            Task::Avoid => "obstacle avoidance (no goal input)",
+            Task::Nav => "navigation (a goal input)",
+        };
+        Err(format!(
+            "{what}: a {} network trained for {trained}; this run is --task {task}: \
+             it needs a network trained with --task {task}",
+            self.variant()
+        ))
     }
 
     /// Where the weights came from, for logs.
@@ -230,17 +288,18 @@ impl GreedyPolicy {
     /// Inputs of the wrong size, or a backend failure.
     pub fn q_values(&self, inputs: &Inputs) -> Result<Vec<f32>, PolicyError> {
         let host = self.bf16.as_ref();
-        self.pool.install(|| q_forward_with(&self.net, host, self.variant, &self.device, inputs))
+        self.pool.install(|| q_forward_with(&self.net, host, &self.config, &self.device, inputs))
     }
 }
 
 impl Policy for GreedyPolicy {
     fn name(&self) -> String {
-        format!("{} from {}", self.variant, self.source)
+        format!("{} from {}", self.config.variant, self.source)
     }
 
     fn sensors(&self) -> Sensors {
-        Sensors { laser: self.variant.uses_laser(), depth: self.variant.uses_depth() }
+        let v = self.config.variant;
+        Sensors { laser: v.uses_laser(), depth: v.uses_depth() }
     }
 
     fn act(
@@ -259,7 +318,7 @@ impl Policy for GreedyPolicy {
         if self.inputs.len() < chunks.len() {
             self.inputs.resize_with(chunks.len(), Inputs::default);
         }
-        let (net, variant, device) = (&self.net, self.variant, &self.device);
+        let (net, config, device) = (&self.net, &self.config, &self.device);
         let host = self.bf16.as_ref();
         let inputs = &mut self.inputs[..chunks.len()];
         let forward = || -> Result<Vec<Vec<f32>>, PolicyError> {
@@ -269,9 +328,9 @@ impl Policy for GreedyPolicy {
                     .par_iter()
                     .zip(inputs.par_iter_mut())
                     .map(|(chunk, inputs)| {
-                        observation_inputs(chunk, variant, inputs);
+                        observation_inputs(chunk, config, inputs)?;
                         pad_rows(inputs, rows);
-                        let mut q = q_forward_with(net, host, variant, device, inputs)?;
+                        let mut q = q_forward_with(net, host, config, device, inputs)?;
                         q.truncate(chunk.len() * Action::COUNT);
                         Ok(q)
                     })
@@ -292,7 +351,9 @@ fn pad_rows(inputs: &mut Inputs, rows: usize) {
     }
     let per = |v: &[f32], size: usize| v.len().checked_div(size).unwrap_or(0);
     let (l, d) = (per(&inputs.laser, inputs.size), per(&inputs.depth, inputs.size));
+    let g = per(&inputs.goal, inputs.size);
     inputs.laser.resize(l * rows, 0.0);
     inputs.depth.resize(d * rows, 0.0);
+    inputs.goal.resize(g * rows, 0.0);
     inputs.size = rows;
 }

@@ -5,10 +5,12 @@
 //! episode share three of their four frames, so 20,000 transitions cost ~0.94 GB instead of
 //! the ~13 GB of two `f32` stacks each. When the frame ring wraps, transitions whose frames
 //! are overwritten leave the buffer first (they are the oldest), so the buffer never returns
-//! a stale frame.
+//! a stale frame. The navigation task's goal (three numbers in the robot frame) is stored
+//! with each transition, for `s_t` and `s_{t+1}`.
 
 use mdrlat_core::{
-    DEPTH_LEN, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY, Rng, normalize_depth, normalize_laser,
+    DEPTH_LEN, FRAME_STACK, GOAL_DIM, LASER_BEAMS, ODOM_HISTORY, Rng, normalize_depth,
+    normalize_goal, normalize_laser,
 };
 use std::collections::VecDeque;
 
@@ -27,10 +29,16 @@ pub struct Transition {
     pub action: u8,
     /// Reward.
     pub reward: f32,
-    /// A collision ended the episode (only this zeroes the bootstrap; a time limit does not).
+    /// A collision, or in navigation the arrival at the goal, ended the episode (only this
+    /// zeroes the bootstrap; a time limit does not).
     pub terminated: bool,
     /// True `(v, ω)` at `t−2, t−1, t` of `s_t`: the auxiliary task's target.
     pub odom: [f32; 2 * ODOM_HISTORY],
+    /// The goal of `s_t` in the robot frame (`mdrlat_core::goal_in_robot_frame`, metres;
+    /// zeros in obstacle avoidance, where the buffer does not store it).
+    pub goal: [f32; GOAL_DIM],
+    /// The goal of `s_{t+1}`.
+    pub next_goal: [f32; GOAL_DIM],
 }
 
 impl Transition {
@@ -60,6 +68,10 @@ pub struct Batch {
     pub terminated: Vec<f32>,
     /// `[B, 6]` auxiliary targets.
     pub odom: Vec<f32>,
+    /// `[B, 3]` normalised goal of `s_t` (`mdrlat_core::normalize_goal`; empty without goals).
+    pub goal: Vec<f32>,
+    /// `[B, 3]` normalised goal of `s_{t+1}`.
+    pub next_goal: Vec<f32>,
 }
 
 /// The replay buffer.
@@ -74,6 +86,8 @@ pub struct ReplayBuffer {
     /// Which sensors are stored (a laser-only run need not keep depth).
     keep_laser: bool,
     keep_depth: bool,
+    /// Whether goals are stored (the navigation task).
+    keep_goal: bool,
 }
 
 /// Metres to millimetres, rounded; 0 and negatives stay 0, beyond 65.535 m saturates.
@@ -101,7 +115,19 @@ impl ReplayBuffer {
             transitions: VecDeque::with_capacity(capacity),
             keep_laser,
             keep_depth,
+            keep_goal: false,
         }
+    }
+
+    /// The same buffer storing each transition's goals (the navigation task) or not.
+    pub fn with_goals(mut self, keep: bool) -> Self {
+        self.keep_goal = keep;
+        self
+    }
+
+    /// Whether it stores goals.
+    pub fn keeps_goals(&self) -> bool {
+        self.keep_goal
     }
 
     /// Transitions held.
@@ -245,6 +271,8 @@ impl ReplayBuffer {
         out.rewards.clear();
         out.terminated.clear();
         out.odom.clear();
+        out.goal.clear();
+        out.next_goal.clear();
         let mut scratch = Vec::with_capacity(DEPTH_LEN);
         for (row, &i) in indices.iter().enumerate() {
             let t = &self.transitions[i];
@@ -268,12 +296,24 @@ impl ReplayBuffer {
             out.rewards.push(t.reward);
             out.terminated.push(if t.terminated { 1.0 } else { 0.0 });
             out.odom.extend_from_slice(&t.odom);
+            if self.keep_goal {
+                out.goal.extend_from_slice(&normalize_goal(&t.goal));
+                out.next_goal.extend_from_slice(&normalize_goal(&t.next_goal));
+            }
         }
     }
 }
 
 /// Magic and version of the replay file format.
 const REPLAY_MAGIC: &[u8; 8] = b"MDRLRB01";
+/// The same format with goals: a third flag byte and the two goals after each record's
+/// targets. Obstacle-avoidance buffers keep writing the first, byte for byte as before.
+const REPLAY_MAGIC_GOALS: &[u8; 8] = b"MDRLRB02";
+
+/// Bytes of one transition record.
+fn record_len(goals: bool) -> usize {
+    8 * 2 * FRAME_STACK + 1 + 4 + 1 + 4 * 2 * ODOM_HISTORY + usize::from(goals) * 4 * 2 * GOAL_DIM
+}
 
 fn io_err(msg: String) -> std::io::Error {
     std::io::Error::new(std::io::ErrorKind::InvalidData, msg)
@@ -286,7 +326,7 @@ impl ReplayBuffer {
     /// # Errors
     /// Any write error.
     pub fn write_to(&self, mut w: impl std::io::Write) -> std::io::Result<()> {
-        w.write_all(REPLAY_MAGIC)?;
+        w.write_all(if self.keep_goal { REPLAY_MAGIC_GOALS } else { REPLAY_MAGIC })?;
         for v in [
             self.capacity as u64,
             self.frame_slots as u64,
@@ -296,6 +336,9 @@ impl ReplayBuffer {
             w.write_all(&v.to_le_bytes())?;
         }
         w.write_all(&[u8::from(self.keep_laser), u8::from(self.keep_depth)])?;
+        if self.keep_goal {
+            w.write_all(&[1])?;
+        }
         let mut bytes = Vec::with_capacity(1 << 20);
         for chunk in [&self.laser_mm, &self.depth_mm] {
             for part in chunk.chunks(1 << 19) {
@@ -315,13 +358,18 @@ impl ReplayBuffer {
             for o in t.odom {
                 bytes.extend_from_slice(&o.to_le_bytes());
             }
+            if self.keep_goal {
+                for g in t.goal.iter().chain(&t.next_goal) {
+                    bytes.extend_from_slice(&g.to_le_bytes());
+                }
+            }
             w.write_all(&bytes)?;
         }
         Ok(())
     }
 
     /// Reads a buffer written by [`ReplayBuffer::write_to`]; it must have the given capacity
-    /// and sensors.
+    /// and sensors, and store goals exactly when `keep_goal`.
     ///
     /// # Errors
     /// A read error, a truncated or foreign file, or a buffer of another shape.
@@ -332,12 +380,15 @@ impl ReplayBuffer {
         frame_reserve: usize,
         keep_laser: bool,
         keep_depth: bool,
+        keep_goal: bool,
     ) -> std::io::Result<Self> {
         let mut magic = [0u8; 8];
         r.read_exact(&mut magic)?;
-        if &magic != REPLAY_MAGIC {
-            return Err(io_err("not an mdrlat replay file (bad magic)".into()));
-        }
+        let goals = match &magic {
+            m if m == REPLAY_MAGIC => false,
+            m if m == REPLAY_MAGIC_GOALS => true,
+            _ => return Err(io_err("not an mdrlat replay file (bad magic)".into())),
+        };
         let mut u64s = [0u64; 4];
         for v in &mut u64s {
             let mut b = [0u8; 8];
@@ -345,12 +396,24 @@ impl ReplayBuffer {
             *v = u64::from_le_bytes(b);
         }
         let [cap, slots, pushed, count] = u64s;
-        let mut flags = [0u8; 2];
-        r.read_exact(&mut flags)?;
-        if cap != capacity as u64 || flags != [u8::from(keep_laser), u8::from(keep_depth)] {
+        let mut flags = [0u8; 3];
+        r.read_exact(&mut flags[..2 + usize::from(goals)])?;
+        if goals && flags[2] != 1 {
+            return Err(io_err(format!("bad goal flag {} in the replay header", flags[2])));
+        }
+        if cap != capacity as u64 || flags[..2] != [u8::from(keep_laser), u8::from(keep_depth)] {
             return Err(io_err(format!(
-                "replay holds capacity {cap} with sensors {flags:?}, the run needs {capacity} with {:?}",
+                "replay holds capacity {cap} with sensors {:?}, the run needs {capacity} with {:?}",
+                &flags[..2],
                 [u8::from(keep_laser), u8::from(keep_depth)]
+            )));
+        }
+        if goals != keep_goal {
+            let holds = |g: bool| if g { "with goals (navigation)" } else { "without goals" };
+            return Err(io_err(format!(
+                "replay holds transitions {}, the run needs them {}",
+                holds(goals),
+                holds(keep_goal)
             )));
         }
         // The file's own frame reserve is kept (older builds used a smaller one); it must be
@@ -363,17 +426,18 @@ impl ReplayBuffer {
             )));
         }
         // Check the length the header implies before allocating anything it asks for.
-        let rec = (8 * 2 * FRAME_STACK + 1 + 4 + 1 + 4 * 2 * ODOM_HISTORY) as u64;
+        let rec = record_len(goals) as u64;
         let per_frame = (u64::from(keep_laser) * LASER_BEAMS as u64
             + u64::from(keep_depth) * DEPTH_LEN as u64)
             * 2;
-        let expect = 8 + 4 * 8 + 2 + slots * per_frame + count * rec;
+        let expect = 8 + 4 * 8 + 2 + u64::from(goals) + slots * per_frame + count * rec;
         if len != expect {
             return Err(io_err(format!(
                 "the header implies {expect} bytes, the file has {len}: truncated or corrupt"
             )));
         }
-        let mut buf = ReplayBuffer::new(capacity, (slots - cap) as usize, keep_laser, keep_depth);
+        let mut buf = ReplayBuffer::new(capacity, (slots - cap) as usize, keep_laser, keep_depth)
+            .with_goals(goals);
         if buf.frame_slots as u64 != slots {
             return Err(io_err("replay frame reserve too small".into()));
         }
@@ -388,14 +452,14 @@ impl ReplayBuffer {
                 }
             }
         }
-        let rec = 8 * 2 * FRAME_STACK + 1 + 4 + 1 + 4 * 2 * ODOM_HISTORY;
-        let mut b = vec![0u8; rec];
+        let mut b = vec![0u8; record_len(goals)];
         for _ in 0..count {
             r.read_exact(&mut b)?;
             let id =
                 |k: usize| u64::from_le_bytes(b[8 * k..8 * k + 8].try_into().unwrap_or([0; 8]));
             let f32_at = |o: usize| f32::from_le_bytes(b[o..o + 4].try_into().unwrap_or([0; 4]));
             let base = 8 * 2 * FRAME_STACK;
+            let goal_at = |k: usize| base + 6 + 4 * (2 * ODOM_HISTORY + k);
             let t = Transition {
                 obs: [id(0), id(1), id(2), id(3)],
                 next: [id(4), id(5), id(6), id(7)],
@@ -403,6 +467,10 @@ impl ReplayBuffer {
                 reward: f32_at(base + 1),
                 terminated: b[base + 5] == 1,
                 odom: std::array::from_fn(|k| f32_at(base + 6 + 4 * k)),
+                goal: std::array::from_fn(|k| if goals { f32_at(goal_at(k)) } else { 0.0 }),
+                next_goal: std::array::from_fn(|k| {
+                    if goals { f32_at(goal_at(GOAL_DIM + k)) } else { 0.0 }
+                }),
             };
             let in_order =
                 buf.transitions.back().is_none_or(|p| p.oldest_frame() <= t.oldest_frame());

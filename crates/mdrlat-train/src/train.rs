@@ -10,6 +10,7 @@ use crate::replay::{Batch, ReplayBuffer, Transition};
 use crate::tensorboard::EventWriter;
 use mdrlat_core::{Action, FRAME_STACK, ODOM_HISTORY, PolicyError, Rng};
 use mdrlat_nn::burn::prelude::Device;
+use mdrlat_sim::config::Task;
 use mdrlat_sim::{
     Env, EpisodeSpec, Observation, Quiet, RunError, RunOptions, SimConfig, SimError, StaticScene,
     VecEnv, run_episodes,
@@ -31,13 +32,6 @@ pub enum TrainError {
     /// The settings are inconsistent.
     #[error(transparent)]
     Config(#[from] crate::config::TrainConfigError),
-    /// The simulator runs a task this learner does not train.
-    #[error(
-        "sim.task = \"{0}\": training learns obstacle avoidance only so far (the replay buffer \
-         and the network do not take the goal input yet); the navigation task runs in \
-         `mdrlat eval --task nav` with the classical planner"
-    )]
-    Task(mdrlat_sim::config::Task),
     /// The simulator failed.
     #[error(transparent)]
     Sim(#[from] SimError),
@@ -101,18 +95,22 @@ pub struct Evaluation {
     pub lengths: Vec<u32>,
     /// Whether each episode ended in a collision.
     pub collisions: Vec<bool>,
+    /// Whether each episode succeeded (`mdrlat_sim::episode_success`): no collision in
+    /// obstacle avoidance, the goal reached in navigation.
+    pub successes: Vec<bool>,
 }
 
 impl Evaluation {
-    /// Share of episodes without a collision (the paper's success, here over the training
-    /// world's episode length).
+    /// Share of successful episodes (obstacle avoidance: the paper's success, here over the
+    /// training world's episode length; navigation: goals reached).
     pub fn success_rate(&self) -> f32 {
-        let ok = self.collisions.iter().filter(|c| !**c).count();
-        ok as f32 / self.collisions.len().max(1) as f32
+        let ok = self.successes.iter().filter(|s| **s).count();
+        ok as f32 / self.successes.len().max(1) as f32
     }
     /// Share of episodes that ended in a collision.
     pub fn collision_rate(&self) -> f32 {
-        1.0 - self.success_rate()
+        let hit = self.collisions.iter().filter(|c| **c).count();
+        hit as f32 / self.collisions.len().max(1) as f32
     }
 
     /// Mean accumulated reward.
@@ -203,7 +201,8 @@ pub fn evaluate(
         step,
         rewards: outcomes.iter().map(|o| o.reward).collect(),
         lengths: outcomes.iter().map(|o| o.steps).collect(),
-        collisions: outcomes.iter().map(|o| !o.success()).collect(),
+        collisions: outcomes.iter().map(|o| o.collision.is_some()).collect(),
+        successes: outcomes.iter().map(|o| o.success()).collect(),
     })
 }
 
@@ -263,9 +262,7 @@ pub fn train(
     mut progress: impl FnMut(&Status),
 ) -> Result<(TrainReport, Learner), TrainError> {
     config.validate()?;
-    if sim.task != mdrlat_sim::config::Task::Avoid {
-        return Err(TrainError::Task(sim.task));
-    }
+    let (task, nav) = (sim.task, sim.task == Task::Nav);
     let started = Instant::now();
     let scene = Arc::new(StaticScene::new(Arc::new(world), sim));
     let mut env = Env::new(scene.clone(), sim.clone())?;
@@ -277,11 +274,14 @@ pub fn train(
     let push_latest = |replay: &mut ReplayBuffer, obs: &Observation| {
         replay.push_frame(obs.laser.latest(), obs.depth.latest())
     };
+    // The goal of an observation in the robot frame, stored with each transition
+    // (navigation; zeros in obstacle avoidance, where the buffer does not keep it).
+    let goal_of = |obs: &Observation| obs.goal.unwrap_or_default();
 
     // Algorithm 1, line 1: replay buffer D, online network θ, target θ⁻ = θ — or all of it,
     // with the environment and every random stream, from the checkpoint.
     let (mut learner, mut replay, mut run, mut metrics, mut evals_csv) = if resume {
-        let (run, learner, replay) = checkpoint::load(dir, config, device)?;
+        let (run, learner, replay) = checkpoint::load(dir, config, task, device)?;
         env.restore(&run.env)?;
         // A partial-window row at the checkpoint step is written again, complete — unless
         // the run is already at its end (killed after its last checkpoint): then nothing
@@ -303,12 +303,14 @@ pub fn train(
             frame_reserve(config.replay_capacity),
             variant.uses_laser(),
             variant.uses_depth(),
-        );
+        )
+        .with_goals(nav);
         let first = push_latest(&mut replay, env.observation());
         let run = Meta {
             format: checkpoint::CHECKPOINT_FORMAT,
             mdrlat_version: env!("CARGO_PKG_VERSION").to_string(),
             variant,
+            task,
             step: 0,
             updates: 0,
             episodes: 0,
@@ -324,7 +326,7 @@ pub fn train(
         };
         let metrics = Csv::create(dir.join("metrics.csv"), METRICS_HEADER)?;
         let evals = Csv::create(dir.join("eval.csv"), EVAL_HEADER)?;
-        (Learner::new(config, device), replay, run, metrics, evals)
+        (Learner::new(config, task, device), replay, run, metrics, evals)
     };
     let mut events = EventWriter::create(dir)
         .map_err(|source| TrainError::Io { path: dir.to_path_buf(), source })?;
@@ -346,18 +348,19 @@ pub fn train(
         let action = if run.explore_rng.uniform() < f64::from(epsilon) {
             run.explore_rng.below(Action::COUNT)
         } else {
-            observation_inputs(&[env.observation()], variant, &mut inputs);
+            observation_inputs(&[env.observation()], learner.net_config(), &mut inputs)
+                .map_err(|source| TrainError::Policy { step: t, source })?;
             let greedy =
                 learner.greedy(&inputs).map_err(|source| TrainError::Policy { step: t, source })?;
             greedy[0].index()
         };
-        let odom = odom_of(env.observation());
+        let (odom, goal) = (odom_of(env.observation()), goal_of(env.observation()));
         // Line 4: execute a_k, observe r_k and s_{k+1}.
         let s =
             env.step(Action::new(action).unwrap_or_else(|| unreachable!("action index < 10")))?;
         let (reward, terminated, done) = (s.reward, s.terminated, s.terminated || s.truncated);
         // Line 5: store (s_k, a_k, r_k, s_{k+1}); s_{k+1} is the true final observation at an
-        // episode's end, and only a collision (terminated) marks it terminal.
+        // episode's end, and only a collision or the goal (terminated) marks it terminal.
         let newest = push_latest(&mut replay, s.observation);
         let stack = run.stack;
         let next = [stack[1], stack[2], stack[3], newest];
@@ -368,6 +371,8 @@ pub fn train(
             reward,
             terminated,
             odom,
+            goal,
+            next_goal: goal_of(s.observation),
         });
         run.episode_reward += reward;
         run.episode_length += 1;

@@ -4,6 +4,7 @@
 use mdrlat_core::{DEPTH_COLS, DEPTH_LEN, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, Rng};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::{Device, Tensor, TensorData};
+use mdrlat_sim::config::Task;
 use mdrlat_train::{Batch, Learner, TrainConfig};
 
 fn batch(b: usize, terminated: &[f32], rng: &mut Rng, depth: bool) -> Batch {
@@ -20,14 +21,26 @@ fn batch(b: usize, terminated: &[f32], rng: &mut Rng, depth: bool) -> Batch {
         rewards: (0..b).map(|i| i as f32 * 0.1 - 0.5).collect(),
         terminated: terminated.to_vec(),
         odom: (0..b * 6).map(|i| (i % 7) as f32 * 0.1).collect(),
+        ..Batch::default()
     }
+}
+
+/// `batch` with normalised goals for `s` and `s'` (the navigation task).
+fn with_goals(mut b: Batch, rng: &mut Rng) -> Batch {
+    let mut goal = || {
+        let (d, a) = (rng.range_f32(0.0, 1.0), rng.range_f32(-3.1, 3.1));
+        [d, a.sin(), a.cos()]
+    };
+    b.goal = (0..b.size).flat_map(|_| goal()).collect();
+    b.next_goal = (0..b.size).flat_map(|_| goal()).collect();
+    b
 }
 
 #[test]
 fn only_termination_zeroes_the_bootstrap_and_the_online_net_picks() {
     let cfg =
         TrainConfig { variant: Variant::LaserOnly, learning_rate: 1e-3, ..TrainConfig::default() };
-    let mut learner = Learner::new(&cfg, &Device::flex());
+    let mut learner = Learner::new(&cfg, Task::Avoid, &Device::flex());
     let mut rng = Rng::seed_from_u64(1);
     // A few updates without a target sync: the online and target networks now differ.
     let warm = batch(8, &[0.0; 8], &mut rng, false);
@@ -38,7 +51,7 @@ fn only_termination_zeroes_the_bootstrap_and_the_online_net_picks() {
     let b = batch(4, &[1.0, 0.0, 1.0, 0.0], &mut rng, false);
     let y = learner.td_targets(&b);
     let q_target = learner.target_q_next(&b);
-    let next = mdrlat_train::Inputs { size: 4, laser: b.next_laser.clone(), depth: vec![] };
+    let next = mdrlat_train::Inputs { size: 4, laser: b.next_laser.clone(), ..Default::default() };
     assert_ne!(learner.q_values(&next), q_target, "the networks diverged");
     let greedy = learner.greedy(&next).expect("finite Q-values");
     for row in 0..4 {
@@ -56,7 +69,7 @@ fn only_termination_zeroes_the_bootstrap_and_the_online_net_picks() {
 fn gradient_steps_reduce_the_losses_on_a_fixed_batch() {
     for variant in [Variant::LaserOnly, Variant::MultiAt] {
         let cfg = TrainConfig { variant, learning_rate: 1e-3, ..TrainConfig::default() };
-        let mut learner = Learner::new(&cfg, &Device::flex());
+        let mut learner = Learner::new(&cfg, Task::Avoid, &Device::flex());
         let mut rng = Rng::seed_from_u64(2);
         let b = batch(8, &[1.0; 8], &mut rng, variant.uses_depth()); // terminal: fixed targets
         let first = learner.update(&b);
@@ -84,7 +97,7 @@ fn same_seed_same_weights() {
     let mut rng = Rng::seed_from_u64(3);
     let b = batch(4, &[0.0, 1.0, 0.0, 1.0], &mut rng, false);
     let run = || {
-        let mut l = Learner::new(&cfg, &Device::flex());
+        let mut l = Learner::new(&cfg, Task::Avoid, &Device::flex());
         let losses: Vec<f32> = (0..3).map(|_| l.update(&b).td).collect();
         (losses, l.td_targets(&b))
     };
@@ -94,7 +107,7 @@ fn same_seed_same_weights() {
 #[test]
 fn profile_times_every_stage_forward_and_backward() {
     let cfg = TrainConfig { variant: Variant::MultiAt, ..TrainConfig::default() };
-    let learner = Learner::new(&cfg, &Device::flex());
+    let learner = Learner::new(&cfg, Task::Avoid, &Device::flex());
     let b = batch(4, &[0.0; 4], &mut Rng::seed_from_u64(5), true);
     let stages = learner.stage_times(&b);
     let names: Vec<&str> = stages.iter().map(|s| s.name).collect();
@@ -131,11 +144,15 @@ fn in_place_updates_spare_the_target(device: &Device) {
     // out of the backward pass permuted.
     let cfg =
         TrainConfig { variant: Variant::Mdrlat, learning_rate: 1e-3, ..TrainConfig::default() };
-    let mut learner = Learner::new(&cfg, device);
+    let mut learner = Learner::new(&cfg, Task::Avoid, device);
     let mut rng = Rng::seed_from_u64(9);
     let b = batch(4, &[0.0; 4], &mut rng, true);
-    let next =
-        mdrlat_train::Inputs { size: 4, laser: b.next_laser.clone(), depth: b.next_depth.clone() };
+    let next = mdrlat_train::Inputs {
+        size: 4,
+        laser: b.next_laser.clone(),
+        depth: b.next_depth.clone(),
+        goal: Vec::new(),
+    };
     let held_q = |net: &mdrlat_nn::QNet| {
         let l = Tensor::<3>::from_data(
             TensorData::new(b.next_laser.clone(), [4, FRAME_STACK, LASER_BEAMS]),
@@ -174,19 +191,29 @@ fn in_place_updates_spare_the_target(device: &Device) {
 }
 
 /// The host kernels and burn's autodiff are one learning rule: from the same seed, a few
-/// gradient steps (with a target sync between them) give the same losses and Q-values.
+/// gradient steps (with a target sync between them) give the same losses and Q-values — with
+/// the navigation task's goal input too.
 #[test]
 fn host_kernels_and_burn_autodiff_take_the_same_steps() {
-    for variant in [Variant::LaserOnly, Variant::Mdrlat] {
+    for (variant, task) in [
+        (Variant::LaserOnly, Task::Avoid),
+        (Variant::Mdrlat, Task::Avoid),
+        (Variant::MultiAt, Task::Nav),
+    ] {
         let cfg = TrainConfig { variant, learning_rate: 1e-4, ..TrainConfig::default() };
         let (mut host, mut burn) =
-            (Learner::new(&cfg, &Device::flex()), Learner::new(&cfg, &Device::flex()));
+            (Learner::new(&cfg, task, &Device::flex()), Learner::new(&cfg, task, &Device::flex()));
         burn.set_host_kernels(false);
         assert!(host.uses_host_kernels() && !burn.uses_host_kernels());
+        assert_eq!(host.net_config().goal_dim, task.goal_dim());
         let mut rng = Rng::seed_from_u64(9);
         let depth = variant.uses_depth();
-        let batches: Vec<Batch> =
-            (0..4).map(|_| batch(6, &[0.0, 1.0, 0.0, 0.0, 0.0, 1.0], &mut rng, depth)).collect();
+        let batches: Vec<Batch> = (0..4)
+            .map(|_| {
+                let b = batch(6, &[0.0, 1.0, 0.0, 0.0, 0.0, 1.0], &mut rng, depth);
+                if task == Task::Nav { with_goals(b, &mut rng) } else { b }
+            })
+            .collect();
         for (i, b) in batches.iter().enumerate() {
             if i == 2 {
                 host.sync_target();
@@ -205,9 +232,17 @@ fn host_kernels_and_burn_autodiff_take_the_same_steps() {
             size: 6,
             laser: batches[0].next_laser.clone(),
             depth: batches[0].next_depth.clone(),
+            goal: batches[0].next_goal.clone(),
         };
         let (qh, qa) = (host.q_values(&next), burn.q_values(&next));
+        assert_eq!(qh.len(), 60, "{variant} {task}");
         let worst = qh.iter().zip(&qa).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
-        assert!(worst < 1e-4, "{variant}: Q-values after the steps differ by {worst}");
+        assert!(worst < 1e-4, "{variant} {task}: Q-values after the steps differ by {worst}");
+        if task == Task::Nav {
+            // The goal is an input: another goal, other Q-values.
+            let mut moved = next.clone();
+            moved.goal.iter_mut().for_each(|g| *g = -*g);
+            assert_ne!(host.q_values(&moved), qh, "the goal changes nothing");
+        }
     }
 }

@@ -4,6 +4,7 @@
 use mdrlat_core::{Action, FRAME_STACK, Observation, Policy, Rng};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
+use mdrlat_sim::config::Task;
 use mdrlat_train::{GreedyPolicy, Inputs, observation_inputs};
 
 fn observation(rng: &mut Rng) -> Observation {
@@ -26,15 +27,16 @@ fn a_decision_does_not_depend_on_the_batch_it_is_in() {
     let batch: Vec<&Observation> = observations.iter().collect();
     let zero = Observation::zeros();
     for variant in [Variant::LaserOnly, Variant::Mdrlat] {
-        let mut policy = GreedyPolicy::untrained(variant, 7, &Device::flex(), 2).expect("policy");
+        let mut policy =
+            GreedyPolicy::untrained(variant, Task::Avoid, 7, &Device::flex(), 2).expect("policy");
         let mut inputs = Inputs::default();
-        observation_inputs(&batch, variant, &mut inputs);
+        observation_inputs(&batch, policy.config(), &mut inputs).expect("inputs");
         let all = policy.q_values(&inputs).expect("q");
         for (i, obs) in batch.iter().enumerate() {
             // Alone, padded to the batch size with other rows of zeros... at another position.
             let mut padded: Vec<&Observation> = vec![&zero; batch.len()];
             padded[(i + 7) % batch.len()] = obs;
-            observation_inputs(&padded, variant, &mut inputs);
+            observation_inputs(&padded, policy.config(), &mut inputs).expect("inputs");
             let one = policy.q_values(&inputs).expect("q");
             let j = (i + 7) % batch.len();
             assert_eq!(
@@ -53,7 +55,7 @@ fn a_decision_does_not_depend_on_the_batch_it_is_in() {
         assert!(actions.iter().all(|a| a.index() < Action::COUNT));
 
         // In forwards of a fixed size, any sub-batch decides as the whole batch did.
-        let mut fixed = GreedyPolicy::untrained(variant, 7, &Device::flex(), 2)
+        let mut fixed = GreedyPolicy::untrained(variant, Task::Avoid, 7, &Device::flex(), 2)
             .expect("policy")
             .with_forward_batch(Some(16));
         let mut whole = Vec::new();
@@ -91,12 +93,13 @@ fn a_model_stored_in_f16_loads_back_and_decides_alike() {
     let observations: Vec<Observation> = (0..70).map(|_| observation(&mut rng)).collect();
     for variant in [Variant::LaserOnly, Variant::MultiAt] {
         let device = Device::flex();
-        let original = GreedyPolicy::untrained(variant, 11, &device, 1).expect("policy");
+        let original =
+            GreedyPolicy::untrained(variant, Task::Avoid, 11, &device, 1).expect("policy");
         let (f32_path, f16_path) = (dir.join("f32.safetensors"), dir.join("model.safetensors"));
         let step = [("mdrlat_step", "1234".to_string())];
-        save_safetensors_as(original.net(), variant, &f32_path, Precision::F32, &step)
+        save_safetensors_as(original.net(), original.config(), &f32_path, Precision::F32, &step)
             .expect("f32");
-        save_safetensors_as(original.net(), variant, &f16_path, Precision::F16, &step)
+        save_safetensors_as(original.net(), original.config(), &f16_path, Precision::F16, &step)
             .expect("f16");
         let (s32, s16) = (
             std::fs::metadata(&f32_path).expect("f32").len(),
@@ -113,8 +116,9 @@ fn a_model_stored_in_f16_loads_back_and_decides_alike() {
         assert_eq!(stored.variant(), variant);
         let d = compare_q(&original, &stored, &observations).expect("compare");
         assert!(d.max_abs > 0.0 && d.max_abs < 1e-2 * d.max_q.max(1.0), "{d:?}");
-        let (v, _, meta) = load_safetensors(&f16_path, &device).expect("load");
-        assert_eq!((v, meta.get("mdrlat_step").map(String::as_str)), (variant, Some("1234")));
+        let (c, _, meta) = load_safetensors(&f16_path, &device).expect("load");
+        assert_eq!((c.variant, c.goal_dim), (variant, 0));
+        assert_eq!(meta.get("mdrlat_step").map(String::as_str), Some("1234"));
     }
     // Not a model: errors naming the file.
     let junk = dir.join("junk.safetensors");
@@ -130,8 +134,9 @@ fn bf16_weights_are_an_opt_in_that_decides_nearly_alike() {
     let mut rng = Rng::seed_from_u64(8);
     let observations: Vec<Observation> = (0..64).map(|_| observation(&mut rng)).collect();
     let device = Device::flex();
-    let f32_policy = GreedyPolicy::untrained(Variant::Mdrlat, 3, &device, 1).expect("policy");
-    let bf16 = GreedyPolicy::untrained(Variant::Mdrlat, 3, &device, 1)
+    let f32_policy =
+        GreedyPolicy::untrained(Variant::Mdrlat, Task::Avoid, 3, &device, 1).expect("policy");
+    let bf16 = GreedyPolicy::untrained(Variant::Mdrlat, Task::Avoid, 3, &device, 1)
         .expect("policy")
         .with_bf16_weights();
     let bf16 = match bf16 {

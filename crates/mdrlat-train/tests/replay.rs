@@ -51,6 +51,8 @@ fn sampled_transitions_equal_what_the_env_produced() {
             reward,
             terminated,
             odom: [0.0; 6],
+            goal: [0.0; 3],
+            next_goal: [0.0; 3],
         });
         expected.push((l0, d0, l1, d1, a as u8, reward, terminated));
         if done {
@@ -123,6 +125,8 @@ fn short_episodes_still_fill_the_buffer() {
                 reward: 0.0,
                 terminated: false,
                 odom: [0.0; 6],
+                goal: [0.0; 3],
+                next_goal: [0.0; 3],
             });
             stack = next;
         }

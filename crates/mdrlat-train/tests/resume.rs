@@ -40,7 +40,7 @@ fn world() -> mdrlat_world::World {
 
 fn probe(learner: &mdrlat_train::Learner) -> Vec<f32> {
     let laser: Vec<f32> = (0..4 * 512).map(|i| (i % 97) as f32 / 97.0).collect();
-    learner.q_values(&Inputs { size: 1, laser, depth: Vec::new() })
+    learner.q_values(&Inputs { size: 1, laser, ..Inputs::default() })
 }
 
 fn read(d: &Path, f: &str) -> String {
@@ -83,6 +83,40 @@ fn an_interrupted_run_resumes_exactly() {
             .expect("resume at the end");
     assert_eq!(report.steps, 250);
     assert_eq!(read(&end, "metrics.csv"), before);
+}
+
+/// The navigation task resumes exactly too: the goals live in the replay buffer and the
+/// environment's state; a checkpoint of one task does not resume as the other.
+#[test]
+fn a_navigation_run_resumes_exactly_and_only_as_navigation() {
+    let dev = Device::flex();
+    let nav = SimConfig { task: mdrlat_sim::config::Task::Nav, ..sim() };
+    let world = || mdrlat_world::builtin::get("nav-train").expect("builtin").expect("valid");
+    let probe = |l: &mdrlat_train::Learner| {
+        let laser: Vec<f32> = (0..4 * 512).map(|i| (i % 89) as f32 / 89.0).collect();
+        l.q_values(&Inputs { size: 1, laser, goal: vec![0.3, 0.6, 0.8], ..Inputs::default() })
+    };
+    let straight = dir("nav-straight");
+    let (_, a) =
+        train(world(), &nav, &config(Variant::LaserOnly, 300), &dev, &straight, false, |_| {})
+            .expect("run");
+    assert_eq!(probe(&a).len(), 10);
+    let replay = std::fs::read(straight.join("checkpoint/replay.bin")).expect("replay");
+    assert_eq!(&replay[..8], b"MDRLRB02", "goals are stored");
+    let cut = dir("nav-cut");
+    train(world(), &nav, &config(Variant::LaserOnly, 200), &dev, &cut, false, |_| {}).expect("run");
+    let e = train(world(), &sim(), &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
+        .expect_err("resumed as obstacle avoidance")
+        .to_string();
+    assert!(e.contains("nav") && e.contains("meta.json"), "{e}");
+    let (_, b) = train(world(), &nav, &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
+        .expect("resume");
+    assert_eq!(probe(&a), probe(&b), "same weights");
+    assert_eq!(read(&straight, "metrics.csv"), read(&cut, "metrics.csv"));
+    assert_eq!(read(&straight, "eval.csv"), read(&cut, "eval.csv"));
+    for d in [straight, cut] {
+        let _ = std::fs::remove_dir_all(d);
+    }
 }
 
 #[test]
@@ -133,7 +167,7 @@ fn two_runs_with_one_seed_write_the_same_file_bytes() {
             .expect("run");
         mdrlat_train::export::save_safetensors(
             &l.policy_net(),
-            Variant::MultiAt,
+            l.net_config(),
             &d.join("model.safetensors"),
         )
         .expect("export");

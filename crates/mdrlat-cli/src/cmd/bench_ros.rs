@@ -8,6 +8,7 @@ use mdrlat_core::{FRAME_STACK, Observation, Policy};
 use mdrlat_nn::Variant;
 use mdrlat_ros::msg::{Image, LaserScan, Odometry, Twist};
 use mdrlat_ros::{ControllerConfig, Node, NodeConfig, Trigger};
+use mdrlat_sim::config::Task;
 use mdrlat_train::GreedyPolicy;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -74,8 +75,8 @@ pub fn run(a: &RosArgs) -> Result<()> {
     }
     let device = a.device.device();
     // Inference alone, one decision at a time on one core.
-    let mut policy =
-        GreedyPolicy::untrained(a.variant, 0, &device, 1).map_err(anyhow::Error::msg)?;
+    let mut policy = GreedyPolicy::untrained(a.variant, Task::Avoid, 0, &device, 1)
+        .map_err(anyhow::Error::msg)?;
     let mut obs = Observation::zeros();
     for _ in 0..FRAME_STACK {
         obs.laser.push_slot().fill(2.8);
@@ -128,8 +129,8 @@ pub fn run(a: &RosArgs) -> Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     let node_thread = {
         let (stop, config) = (stop.clone(), config.clone());
-        let policy =
-            GreedyPolicy::untrained(a.variant, 0, &device, 1).map_err(anyhow::Error::msg)?;
+        let policy = GreedyPolicy::untrained(a.variant, Task::Avoid, 0, &device, 1)
+            .map_err(anyhow::Error::msg)?;
         std::thread::spawn(move || mdrlat_ros::run(&config, Box::new(policy), &stop, &|_| {}))
     };
     let arrived = || arrivals.lock().unwrap_or_else(std::sync::PoisonError::into_inner).len();

@@ -12,7 +12,6 @@ use mdrlat_eval::{
     episodes_csv, eval_sim_config, evaluate_world, nav_records, navigation_csv,
     navigation_markdown, pick_episodes, summary_csv, summary_markdown,
 };
-use mdrlat_nn::QNetConfig;
 use mdrlat_plan::MapSource;
 use mdrlat_sim::config::Task;
 use mdrlat_train::GreedyPolicy;
@@ -180,15 +179,9 @@ pub fn run(a: &Args) -> Result<()> {
                 } else {
                     p
                 };
-                if nav {
-                    bail!(
-                        "--checkpoint {}: a {} network of the obstacle-avoidance task (no goal \
-                         input); --task nav needs a network trained with --task nav",
-                        run.display(),
-                        p.variant()
-                    );
-                }
-                let flops = QNetConfig::new(p.variant()).decision_flops() as f64;
+                p.check_task(config.sim.task, &format!("--checkpoint {}", run.display()))
+                    .map_err(anyhow::Error::msg)?;
+                let flops = p.config().decision_flops() as f64;
                 (Some(Box::new(p)), Some(flops))
             }
             (None, Some(PolicyArg::Scripted(s))) => (Some(s.build(&config.sim, a.seed)), None),
@@ -238,7 +231,7 @@ pub fn run(a: &Args) -> Result<()> {
         if nav {
             let sim = eval_sim_config(&config.sim, &settings);
             let records = nav_records(world, &sim, &e)?;
-            let n = NavSummary::new(&name, &e, &records);
+            let n = NavSummary::new(&name, &e.world, &records);
             pb.suspend(|| {
                 out!(
                     "{:<10} reached {}/{} goals ({} collisions, {} timeouts); mean {} s, path {} m, {} x the shortest",

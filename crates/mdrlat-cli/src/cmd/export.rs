@@ -142,7 +142,7 @@ pub fn run(a: &Args) -> Result<()> {
     if let Some(step) = step {
         extra.push(("mdrlat_step", step));
     }
-    save_safetensors_as(original.net(), original.variant(), &model, precision, &extra)
+    save_safetensors_as(original.net(), original.config(), &model, precision, &extra)
         .map_err(anyhow::Error::msg)?;
     let stored = GreedyPolicy::load(&model, &device, 1).map_err(anyhow::Error::msg)?;
     let obs = observations(&mut original, a.samples, a.seed)?;

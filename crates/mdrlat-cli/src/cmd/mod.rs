@@ -69,14 +69,12 @@ pub enum PolicyArg {
 }
 
 pub fn parse_policy(s: &str) -> Result<PolicyArg, String> {
-    match s {
-        "planner" => Ok(PolicyArg::Planner(MapSource::LaserPlane)),
-        "planner-body" => Ok(PolicyArg::Planner(MapSource::Body)),
-        _ => s
-            .parse::<Scripted>()
-            .map(PolicyArg::Scripted)
-            .map_err(|e| format!("{e}; navigation: planner, planner-body")),
+    if let Some(map) = MapSource::from_policy_name(s) {
+        return Ok(PolicyArg::Planner(map));
     }
+    s.parse::<Scripted>()
+        .map(PolicyArg::Scripted)
+        .map_err(|e| format!("{e}; navigation: {}", MapSource::POLICY_NAMES.join(", ")))
 }
 
 /// The classical planner for `world`, driving a robot with `sim`'s body and sensors.

@@ -86,9 +86,21 @@ fn cores() -> usize {
 /// the device is in this build.
 fn check_sweep(sweep: &Sweep, source: &str) -> Result<()> {
     Config::resolve(None, &sweep.set).with_context(|| format!("{source}: set"))?;
-    load_world(&sweep.world).with_context(|| format!("{source}: world"))?;
+    let nav = sweep.task == mdrlat_sim::config::Task::Nav;
+    let check = |spec: &str, key: &str| -> Result<()> {
+        let world = load_world(spec).with_context(|| format!("{source}: {key}"))?;
+        if nav && world.goals.is_empty() {
+            bail!(
+                "{source}: {key}: world '{}' has no goal region, and task = \"nav\" draws goals \
+                 there (nav-train and nav-test have them; a world file takes a `goal` key)",
+                world.name
+            );
+        }
+        Ok(())
+    };
+    check(&sweep.world, "world")?;
     for w in &sweep.eval.worlds {
-        load_world(w).with_context(|| format!("{source}: eval.worlds"))?;
+        check(w, "eval.worlds")?;
     }
     {
         use clap::ValueEnum;

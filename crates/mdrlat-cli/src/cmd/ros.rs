@@ -10,6 +10,7 @@ use mdrlat_geom::Vec2;
 use mdrlat_nn::Variant;
 use mdrlat_ros::msg::{Header, Image, LaserScan, Odometry, Quaternion, Time, Twist, Vector3};
 use mdrlat_ros::{ControllerConfig, NodeConfig, NonFinite, ScanOptions, Trigger};
+use mdrlat_sim::config::Task;
 use mdrlat_train::GreedyPolicy;
 use std::io::Write;
 use std::path::PathBuf;
@@ -219,9 +220,15 @@ pub fn run(a: &Args) -> Result<()> {
         Some(path) => GreedyPolicy::load(path, &device, a.threads)
             .map_err(anyhow::Error::msg)
             .context("loading the policy")?,
-        None => GreedyPolicy::untrained(a.variant, a.seed, &device, a.threads)
+        None => GreedyPolicy::untrained(a.variant, Task::Avoid, a.seed, &device, a.threads)
             .map_err(anyhow::Error::msg)?,
     };
+    // The node avoids obstacles; it has no goal to give a navigation network.
+    if let Some(path) = &a.checkpoint {
+        policy
+            .check_task(Task::Avoid, &format!("--checkpoint {}", path.display()))
+            .map_err(anyhow::Error::msg)?;
+    }
     if a.bf16 {
         policy = policy.with_bf16_weights().map_err(anyhow::Error::msg).context("--bf16")?;
     }

@@ -1,11 +1,12 @@
 //! `mdrlat train`: one training run of Algorithm 1 into a run directory.
 
-use super::{ensure_dir, load_world};
+use super::{TaskArgs, ensure_dir, load_world};
 use crate::config::Config;
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
+use mdrlat_sim::config::Task;
 use std::path::{Path, PathBuf};
 
 /// The compute device. Backends other than `cpu` exist when the binary is built with
@@ -61,9 +62,11 @@ pub struct Args {
     #[arg(long)]
     variant: Option<Variant>,
     /// World to train in: a built-in name, a .toml world file or a map_server .yaml
-    /// (default: train).
+    /// (default: train; nav-train for --task nav).
     #[arg(long)]
     world: Option<String>,
+    #[command(flatten)]
+    task: TaskArgs,
     /// Environment steps (default: the config's, 400,000).
     #[arg(long)]
     steps: Option<u64>,
@@ -75,7 +78,7 @@ pub struct Args {
     out: Option<PathBuf>,
     /// Continue the run in this directory exactly from its last checkpoint (its saved
     /// config and world; `--steps` may extend it).
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["variant", "world", "seed", "config", "sets", "device"])]
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["variant", "world", "seed", "config", "sets", "device", "task", "start", "goal"])]
     resume: Option<PathBuf>,
     /// Configuration file (see `mdrlat config default`).
     #[arg(long)]
@@ -148,10 +151,13 @@ pub fn run(a: &Args) -> Result<()> {
             if let Some(s) = a.seed {
                 config.train.seed = s;
             }
+            a.task.apply(&mut config.sim)?;
+            config.sim.validate()?;
             config.train.validate()?;
             let device = a.device.unwrap_or(DeviceKind::Cpu);
+            let default_world = if config.sim.task == Task::Nav { "nav-train" } else { "train" };
             let info = RunInfo {
-                world: a.world.clone().unwrap_or_else(|| "train".into()),
+                world: a.world.clone().unwrap_or_else(|| default_world.into()),
                 device: device.name(),
                 mdrlat_version: env!("CARGO_PKG_VERSION").to_string(),
             };
@@ -210,16 +216,24 @@ pub fn run(a: &Args) -> Result<()> {
     let weights = dir.join("model.safetensors");
     mdrlat_train::export::save_safetensors_as(
         &learner.policy_net(),
-        config.train.variant,
+        learner.net_config(),
         &weights,
         mdrlat_train::export::Precision::F32,
         &[("mdrlat_step", report.steps.to_string())],
     )
     .map_err(anyhow::Error::msg)?;
-    let last = report.evaluations.last().map(|e| format!("{:.2} ± {:.2}", e.mean(), e.std()));
+    let last = report.evaluations.last().map(|e| {
+        let reached = if config.sim.task == Task::Nav {
+            format!(", {:.0}% of goals reached", 100.0 * e.success_rate())
+        } else {
+            String::new()
+        };
+        format!("{:.2} ± {:.2}{reached}", e.mean(), e.std())
+    });
     out!(
-        "{} in '{}': step {} of {}, {} updates, {} episodes, {:.0} s this session; last eval {}",
+        "{} ({}) in '{}': step {} of {}, {} updates, {} episodes, {:.0} s this session; last eval {}",
         config.train.variant,
+        config.sim.task,
         info.world,
         report.steps,
         total,
