@@ -199,7 +199,7 @@ fn bad_navigation_arguments_are_clear_errors() {
     let model = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/laser-only-cpu-small");
     assert_clean_failure(
         &eval(&["--task", "nav", "--checkpoint", model]),
-        &["laser-only network of the obstacle-avoidance task", "--task nav"],
+        &["laser-only network trained for obstacle avoidance", "--task nav"],
     );
     // A goal the robot cannot reach: inside a walled-off square.
     let world = dir.join("closed.toml");

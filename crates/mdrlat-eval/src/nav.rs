@@ -235,3 +235,35 @@ pub fn navigation_markdown(rows: &[NavSummary], max_steps: u32, sim: &SimConfig)
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn navigation_csv_rows_read_back_and_bad_rows_name_their_line() {
+        let text = format!(
+            "{NAVIGATION_HEADER}\n\
+             nav-test,0,0,7,8.200,9.300,1,0,,20.4,9.120,8.700,1.048\n\
+             nav-test,0,1,8,1.000,2.000,0,0,bumper,,3.500,6.000,\n\
+             nav-test,0,2,9,1.000,2.000,0,1,,,1.250,6.000,\n"
+        );
+        let rows = parse_navigation_csv(&text, "a/navigation.csv").expect("parses");
+        assert_eq!(rows.len(), 3);
+        assert_eq!(rows[0].0, "nav-test");
+        assert!(rows[0].1.reached && rows[0].1.time_s == Some(20.4));
+        assert!(rows[1].1.collided && !rows[1].1.timeout);
+        assert!(rows[2].1.timeout && !rows[2].1.collided);
+        let navs: Vec<NavRecord> = rows.into_iter().map(|(_, r)| r).collect();
+        let s = NavSummary::new("m", "nav-test", &navs);
+        assert_eq!((s.episodes, s.reached, s.collisions, s.timeouts), (3, 1, 1, 1));
+        assert!((s.path_ratio_mean.expect("one reached") - 9.12 / 8.7).abs() < 1e-3);
+        let bad = text.replace(",1,0,,20.4,", ",1,0,,,");
+        let e = parse_navigation_csv(&bad, "a/navigation.csv").expect_err("disagree");
+        assert!(e.contains("a/navigation.csv:2") && e.contains("disagree"), "{e}");
+        let e = parse_navigation_csv("world,x\n", "b.csv").expect_err("header");
+        assert!(e.contains("b.csv:1: not a navigation.csv header"), "{e}");
+        let e = parse_navigation_csv(&text.replace("9.120", "far"), "c.csv").expect_err("num");
+        assert!(e.contains("c.csv:2: path_m 'far'"), "{e}");
+    }
+}
