@@ -119,16 +119,24 @@ impl Dwa {
     ) -> Velocity {
         let (c, l) = (&self.config, &self.limits);
         let Some(&goal) = plan.last() else { return Velocity::new(0.0, 0.0) };
-        let local: Vec<Vec2> = plan.iter().map(|&p| pose.to_local(p)).collect();
         let goal_local = pose.to_local(goal);
         if goal_local.length() <= c.goal_tolerance_m {
             return Velocity::new(0.0, 0.0);
         }
+        // Only the plan near the robot is scored: from its point nearest the robot, as far
+        // along as the point steered for plus a roll-out's reach (a roll-out ends within
+        // `v_max · horizon` of the robot, so a later stretch of a plan that does not loop
+        // back cannot be nearer its end). The rest is never transformed.
+        let (first, _) = nearest_on_polyline(plan, pose.position());
+        let window_m = c.lookahead_m + 2.0 * l.v_max * c.horizon_s;
+        let last = window_end(plan, first, window_m);
+        let local: Vec<Vec2> = plan[first..=last].iter().map(|&p| pose.to_local(p)).collect();
         let (target, ahead) = lookahead(&local, c.lookahead_m);
         // Only the points a roll-out can reach matter.
         let reach = l.v_max * c.horizon_s + c.radius_m + c.margin_m + c.clearance_cap_m;
         let mut near = thin(obstacles, reach, c.obstacle_cell_m);
         near.sort_by(|a, b| a.length_sq().total_cmp(&b.length_sq()));
+        let points = Points::new(&near);
         // Slow enough to stop at the goal.
         let v_goal =
             (2.0 * l.accel_v * (goal_local.length() - c.goal_tolerance_m * 0.5).max(0.0)).sqrt();
@@ -143,7 +151,7 @@ impl Dwa {
                 // its score.
                 let r = v * c.horizon_s + c.radius_m + c.clearance_cap_m + c.margin_m;
                 let k = near.partition_point(|o| o.length_sq() <= r * r);
-                let Some(score) = self.score(v, w, &near[..k], &local[ahead..], target) else {
+                let Some(score) = self.score(v, w, points.first(k), &local[ahead..], target) else {
                     continue;
                 };
                 if best.is_none_or(|(b, _)| score > b) {
@@ -161,7 +169,7 @@ impl Dwa {
         &self,
         v: f32,
         w: f32,
-        obstacles: &[Vec2],
+        obstacles: (&[f32], &[f32]),
         plan: &[Vec2],
         target: Vec2,
     ) -> Option<f32> {
@@ -174,10 +182,7 @@ impl Dwa {
         let mut end = Pose2::default();
         for k in 1..=steps {
             end = arc(v, w, k as f32 * c.step_s);
-            let p = end.position();
-            for o in obstacles {
-                nearest_sq = nearest_sq.min((*o - p).length_sq());
-            }
+            nearest_sq = nearest_sq.min(nearest_sq_to(obstacles, end.position()));
             if v > 0.0 && nearest_sq < too_close {
                 return None;
             }
@@ -198,6 +203,45 @@ impl Dwa {
                 + c.speed_weight * v,
         )
     }
+}
+
+/// Obstacle points as two coordinate arrays, for the roll-outs' inner loop.
+struct Points {
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+}
+
+impl Points {
+    fn new(points: &[Vec2]) -> Self {
+        Self { xs: points.iter().map(|p| p.x).collect(), ys: points.iter().map(|p| p.y).collect() }
+    }
+
+    /// The first `k` points.
+    fn first(&self, k: usize) -> (&[f32], &[f32]) {
+        (&self.xs[..k], &self.ys[..k])
+    }
+}
+
+/// The smallest squared distance from `p` to the points `(xs, ys)` (infinite for none).
+/// Eight running minima side by side let the compiler use vector instructions; a minimum
+/// does not depend on the order it is taken in, so the result is exactly the one-by-one
+/// loop's.
+fn nearest_sq_to((xs, ys): (&[f32], &[f32]), p: Vec2) -> f32 {
+    const LANES: usize = 8;
+    let mut acc = [f32::INFINITY; LANES];
+    let (cx, cy) = (xs.chunks_exact(LANES), ys.chunks_exact(LANES));
+    let (rx, ry) = (cx.remainder(), cy.remainder());
+    for (x, y) in cx.zip(cy) {
+        for l in 0..LANES {
+            let (dx, dy) = (x[l] - p.x, y[l] - p.y);
+            acc[l] = acc[l].min(dx * dx + dy * dy);
+        }
+    }
+    for (x, y) in rx.iter().zip(ry) {
+        let (dx, dy) = (x - p.x, y - p.y);
+        acc[0] = acc[0].min(dx * dx + dy * dy);
+    }
+    acc.into_iter().fold(f32::INFINITY, f32::min)
 }
 
 /// The points within `reach` of the robot, one per `cell` square (the one nearest the
@@ -235,20 +279,39 @@ fn arc(v: f32, w: f32, t: f32) -> Pose2 {
     Pose2::new(v / w * yaw.sin(), v / w * (1.0 - yaw.cos()), yaw)
 }
 
+/// The segment of `line` (its first point's index) holding the point nearest `p`, and that
+/// point (the first segment on ties; `(0, line[0])` for a single point).
+fn nearest_on_polyline(line: &[Vec2], p: Vec2) -> (usize, Vec2) {
+    let (mut seg, mut at, mut best) = (0, line.first().copied().unwrap_or_default(), f32::INFINITY);
+    for (i, s) in line.windows(2).enumerate() {
+        let q = closest_on_segment(p, s[0], s[1]);
+        if (q - p).length_sq() < best {
+            (seg, at, best) = (i, q, (q - p).length_sq());
+        }
+    }
+    (seg, at)
+}
+
+/// The index of the first point of `line` at least `length_m` along it from point `first`
+/// (the last point if the line is shorter).
+fn window_end(line: &[Vec2], first: usize, length_m: f32) -> usize {
+    let mut left = length_m;
+    for i in first + 1..line.len() {
+        left -= (line[i] - line[i - 1]).length();
+        if left <= 0.0 {
+            return i;
+        }
+    }
+    line.len().saturating_sub(1).max(first)
+}
+
 /// The point `lookahead_m` along the plan (robot frame) from the plan's point nearest the
 /// robot, and the index of the segment that nearest point lies on.
 fn lookahead(plan: &[Vec2], lookahead_m: f32) -> (Vec2, usize) {
     if plan.len() < 2 {
         return (plan.first().copied().unwrap_or_default(), 0);
     }
-    // The nearest point: on segment `seg`, at `from`.
-    let (mut seg, mut from, mut best) = (0, plan[0], f32::INFINITY);
-    for (i, s) in plan.windows(2).enumerate() {
-        let q = closest_on_segment(Vec2::default(), s[0], s[1]);
-        if q.length_sq() < best {
-            (seg, from, best) = (i, q, q.length_sq());
-        }
-    }
+    let (seg, mut from) = nearest_on_polyline(plan, Vec2::default());
     let mut left = lookahead_m;
     for i in seg..plan.len() - 1 {
         let d = plan[i + 1] - from;
