@@ -10,9 +10,11 @@
 
 use crate::EvalError;
 use crate::protocol::{EpisodeRecord, WorldEval, collision_kind};
+use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS};
 use mdrlat_geom::Vec2;
 use mdrlat_render::{
-    Chart, Image, RobotMark, Scene, Series, line_chart, map_frame, side_by_side, stacked, top_view,
+    Chart, Image, LaserRays, RobotMark, Scene, Series, depth_view, line_chart, map_frame,
+    side_by_side, stacked, top_view,
 };
 use mdrlat_sim::rollout::TrajectoryRow;
 use mdrlat_sim::{
@@ -21,6 +23,43 @@ use mdrlat_sim::{
 };
 use mdrlat_world::World;
 use std::sync::Arc;
+
+/// A scale that makes the longer side of the world about `target_px` pixels.
+pub fn px_per_m(world: &World, target_px: f32) -> f32 {
+    let s = world.bounds.size();
+    (target_px / s.x.max(s.y)).clamp(4.0, 120.0)
+}
+
+/// The environment's state from above (robot, rays, pedestrians, trail) with the current
+/// depth image beside it.
+pub fn snapshot(env: &Env, trail: &[Vec2], caption: &str, collided: bool, scale: f32) -> Image {
+    let peds = env.pedestrian_discs();
+    let obs = env.observation();
+    let laser = env.laser();
+    let scene = Scene {
+        robot: Some(RobotMark { pose: env.pose(), radius: env.config().robot.radius_m, collided }),
+        pedestrians: &peds,
+        laser: Some(LaserRays {
+            origin: env.pose(),
+            angles: laser.angles(),
+            ranges: obs.laser.latest(),
+            max_range: laser.config().max_range_m,
+        }),
+        trail,
+        goal: env.goal(),
+        caption: Some(caption),
+        ..Scene::new(env.world())
+    };
+    let top = top_view(&scene, scale);
+    let depth = depth_view(
+        obs.depth.latest(),
+        DEPTH_ROWS,
+        DEPTH_COLS,
+        env.depth_camera().config().max_range_m,
+        2,
+    );
+    side_by_side(&[&top, &depth], 12)
+}
 
 /// Top views in a strip.
 pub const PANELS: usize = 6;

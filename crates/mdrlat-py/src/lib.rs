@@ -1,0 +1,249 @@
+//! `mdrlat._core`: the simulator for Python. One class, [`Env`], over the Rust
+//! [`mdrlat_sim::Env`]: observations in metres as numpy arrays (the frame stacks oldest
+//! first, as the networks read them), Gymnasium's `terminated`/`truncated` kept apart, the
+//! top view with the depth image as an RGB array. The Gymnasium classes are Python
+//! (`python/mdrlat/`); this module only moves data. Every failure is a Python exception
+//! naming what failed; nothing panics across the boundary.
+
+use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, GOAL_DIM, LASER_BEAMS, ODOM_HISTORY};
+use mdrlat_geom::{Pose2, Vec2};
+use mdrlat_sim::config::Task;
+use mdrlat_sim::{Collision, SimConfig};
+use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::{IntoPyArray, PyArray3};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// The simulator's name for a collision (`bumper`, `pedestrian`, `laser`), as `episodes.csv`
+/// writes it.
+fn collision_name(c: &Collision) -> &'static str {
+    mdrlat_eval::protocol::collision_kind(c)
+}
+
+fn sim_error(e: mdrlat_sim::SimError) -> PyErr {
+    PyRuntimeError::new_err(e.to_string())
+}
+
+/// One simulated robot in one world (paper section 2.1; SPEC §2).
+#[pyclass(module = "mdrlat._core")]
+pub struct Env {
+    env: mdrlat_sim::Env,
+    /// The episode's positions, for the picture.
+    trail: Vec<Vec2>,
+    /// How the last step ended, for the picture.
+    collided: bool,
+    /// The world as given (a name or a path), for pickling.
+    spec: String,
+    /// The settings as given (JSON), for pickling.
+    config_json: String,
+}
+
+impl Env {
+    /// The current observation as a dict of numpy arrays.
+    fn observation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let obs = self.env.observation();
+        let stack = |s: &mdrlat_core::FrameStack| {
+            let mut out = vec![0.0f32; FRAME_STACK * s.frame_len()];
+            s.write_stacked(&mut out, |from, to| to.copy_from_slice(from));
+            out
+        };
+        let d = PyDict::new(py);
+        let laser = Array2::from_shape_vec((FRAME_STACK, LASER_BEAMS), stack(&obs.laser))
+            .map_err(|e| PyRuntimeError::new_err(format!("laser stack: {e}")))?;
+        let depth =
+            Array3::from_shape_vec((FRAME_STACK, DEPTH_ROWS, DEPTH_COLS), stack(&obs.depth))
+                .map_err(|e| PyRuntimeError::new_err(format!("depth stack: {e}")))?;
+        let odom: Vec<f32> = obs.odom.iter().flat_map(|v| [v.v, v.w]).collect();
+        debug_assert_eq!(odom.len(), 2 * ODOM_HISTORY);
+        d.set_item("laser", laser.into_pyarray(py))?;
+        d.set_item("depth", depth.into_pyarray(py))?;
+        d.set_item("odom", Array1::from_vec(odom).into_pyarray(py))?;
+        if let Some(goal) = obs.goal {
+            d.set_item("goal", Array1::from_vec(goal.to_vec()).into_pyarray(py))?;
+        }
+        Ok(d)
+    }
+
+    /// The step's `info` dict: pose, velocity, `d_min`, collision kind, goal reached.
+    fn info<'py>(
+        &self,
+        py: Python<'py>,
+        step: Option<&mdrlat_sim::StepInfo>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        let pose = self.env.pose();
+        d.set_item("pose", (pose.x, pose.y, pose.yaw.to_degrees()))?;
+        d.set_item("step", self.env.episode_steps())?;
+        if let Some(goal) = self.env.goal() {
+            d.set_item("goal", (goal.x, goal.y))?;
+        }
+        if let Some(s) = step {
+            d.set_item("velocity", (s.velocity.v, s.velocity.w))?;
+            d.set_item("d_min", s.d_min)?;
+            d.set_item("collision", s.collision.as_ref().map(collision_name))?;
+            d.set_item("reached_goal", s.reached_goal)?;
+        }
+        Ok(d)
+    }
+}
+
+#[pymethods]
+impl Env {
+    /// An environment in `world` (a built-in name, a `.toml` world file or a map_server
+    /// `.yaml`) with the simulator settings `config_json` (a JSON object of `[sim]` keys;
+    /// the defaults for everything it leaves out).
+    #[new]
+    #[pyo3(signature = (world, config_json = "{}"))]
+    fn new(world: &str, config_json: &str) -> PyResult<Self> {
+        let config: SimConfig = serde_json::from_str(config_json)
+            .map_err(|e| PyValueError::new_err(format!("simulator settings: {e}")))?;
+        config.validate().map_err(|e| PyValueError::new_err(format!("simulator settings: {e}")))?;
+        let loaded = mdrlat_world::load(world).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let env = mdrlat_sim::Env::from_world(loaded, config)
+            .map_err(|e| PyValueError::new_err(format!("world '{world}': {e}")))?;
+        let trail = vec![env.pose().position()];
+        Ok(Self {
+            env,
+            trail,
+            collided: false,
+            spec: world.to_string(),
+            config_json: config_json.to_string(),
+        })
+    }
+
+    /// Starts an episode: from the seed's start pose (and goal, navigation), or at `pose`
+    /// `(x, y, yaw_deg)`. Returns `(observation, info)`.
+    #[pyo3(signature = (seed = None, pose = None))]
+    fn reset<'py>(
+        &mut self,
+        py: Python<'py>,
+        seed: Option<u64>,
+        pose: Option<(f32, f32, f32)>,
+    ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyDict>)> {
+        let pose = pose.map(|(x, y, yaw)| Pose2::new(x, y, yaw.to_radians()));
+        if let Some(p) = pose
+            && !(p.x.is_finite() && p.y.is_finite() && p.yaw.is_finite())
+        {
+            return Err(PyValueError::new_err(format!("pose {p:?}: not finite")));
+        }
+        self.env.reset_with(seed, pose).map_err(sim_error)?;
+        self.trail.clear();
+        self.trail.push(self.env.pose().position());
+        self.collided = false;
+        Ok((self.observation(py)?, self.info(py, None)?))
+    }
+
+    /// One control period with Table 1 action `action` (0–9). Returns `(observation,
+    /// reward, terminated, truncated, info)`; `terminated` is a collision (or, navigating,
+    /// the goal reached), `truncated` the time limit.
+    #[allow(clippy::type_complexity)]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        action: i64,
+    ) -> PyResult<(Bound<'py, PyDict>, f32, bool, bool, Bound<'py, PyDict>)> {
+        let a = usize::try_from(action)
+            .ok()
+            .and_then(mdrlat_core::Action::new)
+            .ok_or_else(|| PyValueError::new_err(format!("action {action}: expected 0 to 9")))?;
+        let s = self.env.step(a).map_err(sim_error)?;
+        let (reward, terminated, truncated, info) = (s.reward, s.terminated, s.truncated, s.info);
+        self.collided = info.collision.is_some();
+        self.trail.push(self.env.pose().position());
+        Ok((self.observation(py)?, reward, terminated, truncated, self.info(py, Some(&info))?))
+    }
+
+    /// The top view (robot, laser rays, pedestrians, the episode's trail, the goal) with
+    /// the current depth image beside it, as a `(height, width, 3)` uint8 array.
+    fn render<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<u8>>> {
+        let scale = mdrlat_eval::figures::px_per_m(self.env.world(), 480.0);
+        let caption = format!("{} step {}", self.env.world().name, self.env.episode_steps());
+        let image =
+            mdrlat_eval::figures::snapshot(&self.env, &self.trail, &caption, self.collided, scale);
+        let (w, h) = (image.width as usize, image.height as usize);
+        let rgb: Vec<u8> = image.rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+        let array = Array3::from_shape_vec((h, w, 3), rgb)
+            .map_err(|e| PyRuntimeError::new_err(format!("picture: {e}")))?;
+        Ok(array.into_pyarray(py))
+    }
+
+    /// The world's name.
+    #[getter]
+    fn world_name(&self) -> String {
+        self.env.world().name.clone()
+    }
+
+    /// The world as given to the constructor.
+    #[getter]
+    fn spec(&self) -> String {
+        self.spec.clone()
+    }
+
+    /// The settings as given to the constructor (JSON).
+    #[getter]
+    fn config_json(&self) -> String {
+        self.config_json.clone()
+    }
+
+    /// The task: `avoid` or `nav`.
+    #[getter]
+    fn task(&self) -> &'static str {
+        self.env.config().task.name()
+    }
+
+    /// Steps after which an episode is truncated.
+    #[getter]
+    fn max_episode_steps(&self) -> u32 {
+        self.env.config().max_episode_steps
+    }
+
+    /// The length of the world's bounds' diagonal, metres (no goal is farther).
+    #[getter]
+    fn world_diagonal(&self) -> f32 {
+        self.env.world().bounds.size().length()
+    }
+
+    /// The laser's and the depth camera's largest range, metres (the observation bounds).
+    #[getter]
+    fn max_ranges(&self) -> (f32, f32) {
+        let c = self.env.config();
+        (c.laser.max_range_m, c.depth.max_range_m)
+    }
+}
+
+/// The array shapes of an observation: `laser`, `depth`, `odom`, `goal`.
+#[pyfunction]
+fn shapes() -> ((usize, usize), (usize, usize, usize), usize, usize) {
+    ((FRAME_STACK, LASER_BEAMS), (FRAME_STACK, DEPTH_ROWS, DEPTH_COLS), 2 * ODOM_HISTORY, GOAL_DIM)
+}
+
+/// The `(v m/s, w rad/s)` command of each action of the paper's Table 1, by index.
+#[pyfunction]
+fn actions() -> Vec<(f32, f32)> {
+    mdrlat_core::TABLE_1.iter().map(|a| (a.v, a.w)).collect()
+}
+
+/// The built-in worlds' names.
+#[pyfunction]
+fn builtin_worlds() -> Vec<&'static str> {
+    mdrlat_world::builtin::NAMES.to_vec()
+}
+
+/// Whether a task name is known (`avoid`, `nav`).
+#[pyfunction]
+fn check_task(name: &str) -> PyResult<String> {
+    name.parse::<Task>().map(|t| t.name().to_string()).map_err(PyValueError::new_err)
+}
+
+/// The module.
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Env>()?;
+    m.add_function(wrap_pyfunction!(shapes, m)?)?;
+    m.add_function(wrap_pyfunction!(actions, m)?)?;
+    m.add_function(wrap_pyfunction!(builtin_worlds, m)?)?;
+    m.add_function(wrap_pyfunction!(check_task, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

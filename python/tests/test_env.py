@@ -1,0 +1,135 @@
+"""The Gymnasium environments: the ecosystem's own checker, determinism, pickling, dtypes and
+bounds, and bad input as Python exceptions."""
+
+import pickle
+import warnings
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import mdrlat
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.parametrize("env_id", sorted(mdrlat.ENV_IDS))
+def test_every_registered_id_passes_gymnasiums_checker(env_id):
+    env = gym.make(env_id, render_mode="rgb_array")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the checker's warnings are failures here
+        check_env(env.unwrapped)
+    frame = env.unwrapped.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    env.close()
+
+
+def rollout(env, seed, steps=120):
+    """Observations, rewards and flags of `steps` steps of a seeded action sequence."""
+    rng = np.random.default_rng(seed)
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for _ in range(steps):
+        obs, r, term, trunc, info = env.step(int(rng.integers(10)))
+        out.append((obs, r, term, trunc, info["collision"]))
+        if term or trunc:
+            obs, _ = env.reset()
+            out.append(obs)
+    return out
+
+
+def same(a, b):
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+    if isinstance(a, tuple):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def test_the_same_seed_gives_the_same_arrays():
+    a = rollout(mdrlat.make("crowd"), 3)
+    b = rollout(mdrlat.make("crowd"), 3)
+    assert len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+    c = rollout(mdrlat.make("crowd"), 4)
+    assert not same(a[0], c[0]), "another seed, another start"
+
+
+def test_observations_have_the_documented_shapes_dtypes_and_units():
+    env = mdrlat.make("train")
+    obs, info = env.reset(seed=0)
+    assert obs["laser"].shape == (4, 512) and obs["depth"].shape == (4, 128, 160)
+    assert obs["odom"].shape == (6,)
+    assert all(v.dtype == np.float32 for v in obs.values())
+    assert env.observation_space.contains(obs)
+    assert 0.0 < obs["laser"].max() <= 5.6 and 0.0 <= obs["depth"].min()
+    assert set(info) >= {"pose", "step"}
+    obs, r, term, trunc, info = env.step(0)
+    assert isinstance(r, float) and isinstance(term, bool) and isinstance(trunc, bool)
+    assert set(info) >= {"pose", "velocity", "d_min", "collision"}
+    # Table 1: action 1 drives straight at 0.5 m/s; 8 and 9 turn on the spot at π/3 rad/s.
+    assert len(mdrlat.ACTIONS) == 10 and mdrlat.ACTIONS[1] == pytest.approx((0.5, 0.0))
+    assert mdrlat.ACTIONS[9] == pytest.approx((0.0, np.pi / 3))
+
+
+def test_a_pose_starts_the_episode_there_and_time_runs_out_as_truncation():
+    env = mdrlat.make("train", max_episode_steps=5)
+    x, y, _ = env.reset(seed=0)[1]["pose"]  # a drawn start: free space
+    _, info = env.reset(options={"pose": (x, y, 90.0)})
+    assert info["pose"] == pytest.approx((x, y, 90.0), abs=1e-4)
+    for k in range(5):
+        _, _, term, trunc, _ = env.step(9)  # turn on the spot: no collision
+    assert (term, trunc) == (False, True)
+
+
+def test_the_navigation_worlds_add_the_goal():
+    env = gym.make("mdrlat/NavTest-v0")
+    obs, info = env.reset(seed=0)
+    assert env.unwrapped.task == "nav" and obs["goal"].shape == (3,)
+    assert "goal" in info
+    d, s, c = obs["goal"]
+    assert d > 0 and abs(s * s + c * c - 1) < 1e-4
+
+
+def test_world_files_and_maps_load_by_path():
+    env = mdrlat.make(str(REPO / "worlds" / "office.toml"))
+    assert env.world_name == "office"
+    maps = sorted((REPO.parent / "shared" / "data" / "maps").glob("*.yaml"))
+    if maps:
+        env = mdrlat.make(str(maps[0]))
+        env.reset(seed=0)
+
+
+def test_an_env_pickles_and_comes_back_the_same():
+    env = mdrlat.make("office", max_episode_steps=50)
+    again = pickle.loads(pickle.dumps(env))
+    assert again.max_episode_steps == 50
+    assert same(env.reset(seed=2)[0], again.reset(seed=2)[0])
+    again.close()
+
+
+def test_bad_input_raises_python_exceptions_naming_it():
+    with pytest.raises(ValueError, match="mall"):
+        mdrlat.make("mall")
+    with pytest.raises(ValueError, match="max_episode_stepz"):
+        mdrlat.make("train", max_episode_stepz=3)
+    with pytest.raises(ValueError, match="noise_std_m"):
+        mdrlat.make("train", laser={"noise_std_m": -1.0})
+    with pytest.raises(ValueError, match="walk"):
+        mdrlat.make("train", task="walk")
+    with pytest.raises(ValueError, match="goal region"):
+        mdrlat.make("office", task="nav")
+    env = mdrlat.make("train")
+    env.reset(seed=0)
+    for bad in (10, -1):
+        with pytest.raises(ValueError, match="action"):
+            env.step(bad)
+    with pytest.raises(ValueError, match="pose"):
+        env.reset(options={"pose": (1.0, 2.0)})
+    with pytest.raises(ValueError, match="only 'pose'"):
+        env.reset(options={"goal": (1.0, 2.0)})
+    with pytest.raises((ValueError, RuntimeError), match="pose"):
+        env.reset(options={"pose": (float("nan"), 2.0, 0.0)})
+    with pytest.raises(ValueError, match="render_mode"):
+        mdrlat.make("train", render_mode="human")
