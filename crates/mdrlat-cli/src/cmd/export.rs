@@ -8,6 +8,7 @@ use super::train::DeviceKind;
 use super::{ensure_dir, load_world};
 use anyhow::{Context, Result, bail};
 use mdrlat_core::{Observation, Policy};
+use mdrlat_sim::config::Task;
 use mdrlat_sim::{Env, SimConfig};
 use mdrlat_train::GreedyPolicy;
 use mdrlat_train::export::{Precision, QDifference, compare_q, save_safetensors_as};
@@ -26,8 +27,8 @@ pub struct Args {
     /// Store the weights in f32 instead of f16.
     #[arg(long)]
     f32: bool,
-    /// An evaluation of this run (`mdrlat eval --out`): its summary.md and summary.csv are
-    /// copied beside the model.
+    /// An evaluation of this run (`mdrlat eval --out`): its summary.md (navigation.md for a
+    /// navigation network) and summary.csv are copied beside the model.
     #[arg(long, value_name = "EVAL_DIR")]
     eval: Option<PathBuf>,
     /// Observations the Q-values of the stored model are compared on (driven by the model
@@ -42,14 +43,23 @@ pub struct Args {
     overwrite: bool,
 }
 
-/// Observations the policy meets when it drives in the test worlds (a new episode after
-/// each collision or 300 steps), `n` in all.
+/// The worlds a model of `task` is compared in: the test worlds of its task.
+fn test_worlds(task: Task) -> &'static [&'static str] {
+    match task {
+        Task::Avoid => &["office", "furnished", "crowd"],
+        Task::Nav => &["nav-test"],
+    }
+}
+
+/// Observations the policy meets when it drives in the test worlds of its task (a new
+/// episode after each collision, goal or 300 steps), `n` in all.
 fn observations(policy: &mut GreedyPolicy, n: usize, seed: u64) -> Result<Vec<Observation>> {
-    let worlds = ["office", "furnished", "crowd"];
+    let worlds = test_worlds(policy.task());
+    let sim = SimConfig { task: policy.task(), ..SimConfig::default() };
     let per = n.div_ceil(worlds.len());
     let mut out = Vec::with_capacity(n);
     for (w, name) in worlds.iter().enumerate() {
-        let mut env = Env::from_world(load_world(name)?, SimConfig::default())?;
+        let mut env = Env::from_world(load_world(name)?, sim.clone())?;
         let mut episode = 0u64;
         let mut obs = env.reset(Some(seed + 1000 * w as u64))?.clone();
         let mut steps = 0;
@@ -78,7 +88,7 @@ fn readme(
     precision: Precision,
     bytes: u64,
     diff: &QDifference,
-    eval: Option<&str>,
+    eval: Option<(&str, &str)>,
 ) -> String {
     let mut s = String::new();
     let name = out.file_name().map_or("model".into(), |n| n.to_string_lossy().into_owned());
@@ -93,17 +103,26 @@ fn readme(
     let _ = writeln!(
         s,
         "- Stored against the f32 original, {diff}, on observations the model meets driving in \
-         office, furnished and crowd."
+         {}.",
+        test_worlds(policy.task()).join(", ")
     );
-    let _ = writeln!(
-        s,
-        "\nUse it without training:\n\n```sh\nmdrlat eval --checkpoint {0} --out eval/{name}\nmdrlat ros-sim --world office &   # a simulated robot over ROS\nmdrlat ros --checkpoint {0}      # drives it\n```\n",
-        out.display()
-    );
-    if let Some(table) = eval {
+    if policy.task() == Task::Nav {
         let _ = writeln!(
             s,
-            "## Its success table (`summary.md`)\n\n{}",
+            "- A goal-conditioned network (the navigation task): it reads the goal in the robot frame.\n\nUse it without training:\n\n```sh\nmdrlat eval --task nav --checkpoint {0} --figures 8 --out eval/{name}\n```\n",
+            out.display()
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "\nUse it without training:\n\n```sh\nmdrlat eval --checkpoint {0} --out eval/{name}\nmdrlat ros-sim --world office &   # a simulated robot over ROS\nmdrlat ros --checkpoint {0}      # drives it\n```\n",
+            out.display()
+        );
+    }
+    if let Some((name, table)) = eval {
+        let _ = writeln!(
+            s,
+            "## Its success table (`{name}`)\n\n{}",
             table.trim_end().replacen("# ", "### ", 1)
         );
     }
@@ -128,9 +147,11 @@ pub fn run(a: &Args) -> Result<()> {
         .with_context(|| format!("--checkpoint {}", a.checkpoint.display()))?;
     let eval_table = match &a.eval {
         Some(dir) => {
-            let md = std::fs::read_to_string(dir.join("summary.md"))
-                .with_context(|| format!("--eval {}: no summary.md", dir.display()))?;
-            Some((md, dir.join("summary.csv")))
+            // A navigation evaluation's table is navigation.md (time, path, path ratio).
+            let table = if original.task() == Task::Nav { "navigation.md" } else { "summary.md" };
+            let md = std::fs::read_to_string(dir.join(table))
+                .with_context(|| format!("--eval {}: no {table}", dir.display()))?;
+            Some((table, md, dir.join("summary.csv")))
         }
         None => None,
     };
@@ -148,8 +169,8 @@ pub fn run(a: &Args) -> Result<()> {
     let obs = observations(&mut original, a.samples, a.seed)?;
     let diff = compare_q(&original, &stored, &obs).map_err(|e| anyhow::anyhow!("{e}"))?;
     let bytes = std::fs::metadata(&model).map(|m| m.len()).unwrap_or(0);
-    if let Some((md, csv)) = &eval_table {
-        std::fs::write(a.out.join("summary.md"), md).context("writing summary.md")?;
+    if let Some((table, md, csv)) = &eval_table {
+        std::fs::write(a.out.join(table), md).with_context(|| format!("writing {table}"))?;
         if csv.exists() {
             std::fs::copy(csv, a.out.join("summary.csv")).context("copying summary.csv")?;
         }
@@ -160,7 +181,7 @@ pub fn run(a: &Args) -> Result<()> {
         precision,
         bytes,
         &diff,
-        eval_table.as_ref().map(|t| t.0.as_str()),
+        eval_table.as_ref().map(|t| (t.0, t.1.as_str())),
     );
     std::fs::write(a.out.join("README.md"), text).context("writing README.md")?;
     out!("{}: {precision:?}, {:.1} MB; against f32 {diff}", model.display(), bytes as f64 / 1e6);
