@@ -149,6 +149,37 @@ fn a_goal_conditioned_network_trains_and_is_evaluated_on_navigation() {
         dir.join("d").to_str().expect("utf-8"),
     ]);
     assert_clean_failure(&o, &["trained for navigation"]);
+    // Exported for shipping, it is compared on navigation observations and stays one.
+    let shipped = dir.join("shipped");
+    let o = mdrlat(&[
+        "export",
+        "--checkpoint",
+        r,
+        "--eval",
+        a.to_str().expect("utf-8"),
+        "--samples",
+        "40",
+        "--out",
+        shipped.to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let readme = std::fs::read_to_string(shipped.join("README.md")).expect("README");
+    assert!(readme.contains("goal-conditioned") && readme.contains("nav-test"), "{readme}");
+    assert!(shipped.join("navigation.md").is_file());
+    let o = mdrlat(&[
+        "eval",
+        "--task",
+        "nav",
+        "--checkpoint",
+        shipped.to_str().expect("utf-8"),
+        "--episodes",
+        "2",
+        "--runs",
+        "1",
+        "--out",
+        dir.join("e").to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
     // A world without goal regions cannot train navigation.
     let o = mdrlat(&[
         "train",
