@@ -4,7 +4,9 @@
 >>> env = gymnasium.make("mdrlat/Train-v0")
 >>> obs, info = env.reset(seed=0)
 
-``mdrlat.make(world, **settings)`` takes any built-in world, world file or map_server map.
+``mdrlat.make(world, **settings)`` takes any built-in world, world file or map_server map;
+``gymnasium.make_vec("mdrlat/Train-v0", num_envs=N)`` or ``mdrlat.VectorEnv(world, N)`` steps
+N of them in Rust on every core.
 """
 
 from __future__ import annotations
@@ -13,9 +15,10 @@ import gymnasium as gym
 
 from . import _core
 from .env import ACTIONS, MdrlatEnv
+from .vector import VectorEnv
 
 __version__ = _core.__version__
-__all__ = ["ACTIONS", "MdrlatEnv", "make", "ENV_IDS"]
+__all__ = ["ACTIONS", "MdrlatEnv", "VectorEnv", "make", "ENV_IDS"]
 
 #: The registered ids: one per built-in world (the navigation worlds with the nav task).
 ENV_IDS = {
@@ -38,8 +41,12 @@ def _register() -> None:
     for env_id, kwargs in ENV_IDS.items():
         if env_id not in gym.registry:
             # The time limit is the simulator's own (truncated = True), not a wrapper's.
-            gym.register(id=env_id, entry_point="mdrlat.env:MdrlatEnv", kwargs=kwargs,
-                         disable_env_checker=False)
+            gym.register(
+                id=env_id,
+                entry_point="mdrlat.env:MdrlatEnv",
+                vector_entry_point="mdrlat.vector:VectorEnv",
+                kwargs=kwargs,
+            )
 
 
 _register()

@@ -133,3 +133,52 @@ def test_bad_input_raises_python_exceptions_naming_it():
         env.reset(options={"pose": (float("nan"), 2.0, 0.0)})
     with pytest.raises(ValueError, match="render_mode"):
         mdrlat.make("train", render_mode="human")
+
+
+def test_the_vector_env_steps_exactly_as_a_list_of_single_envs():
+    n, seed = 3, 11
+    vec = gym.make_vec("mdrlat/Crowd-v0", num_envs=n)
+    assert isinstance(vec, mdrlat.VectorEnv)
+    assert vec.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
+    singles = [mdrlat.make("crowd") for _ in range(n)]
+    obs, _ = vec.reset(seed=seed)
+    assert vec.observation_space.contains({k: v.copy() for k, v in obs.items()})
+    expect = [e.reset(seed=seed + i)[0] for i, e in enumerate(singles)]
+    rng = np.random.default_rng(5)
+    ended = 0
+    for _ in range(150):
+        actions = rng.integers(10, size=n)
+        obs, rewards, term, trunc, infos = vec.step(actions)
+        assert rewards.dtype == np.float32 and term.dtype == np.bool_
+        for i, env in enumerate(singles):
+            o, r, te, tr, info = env.step(int(actions[i]))
+            assert (rewards[i], term[i], trunc[i]) == (np.float32(r), te, tr)
+            if te or tr:
+                ended += 1
+                assert infos["_final_obs"][i]
+                assert same(infos["final_obs"][i], o)
+                assert infos["final_info"]["collision"][i] == info["collision"]
+                o, _ = env.reset()
+            assert all(np.array_equal(obs[k][i], o[k]) for k in o)
+    assert ended > 0, "no episode ended: the autoreset path was not tested"
+    vec.close()
+
+
+def test_the_vector_env_refuses_bad_input():
+    vec = mdrlat.VectorEnv("train", num_envs=2)
+    with pytest.raises(RuntimeError, match="reset"):
+        vec.step([0, 0])
+    vec.reset(seed=0)
+    with pytest.raises(ValueError, match="2 environments"):
+        vec.step([0, 0, 0])
+    with pytest.raises(ValueError, match=r"actions\[1\] = 12"):
+        vec.step([0, 12])
+    with pytest.raises(ValueError, match="3 seeds"):
+        vec.reset(seed=[1, 2, 3])
+    with pytest.raises(ValueError, match="num_envs 0"):
+        mdrlat.VectorEnv("train", num_envs=0)
+    with pytest.raises(ValueError, match="mall"):
+        mdrlat.VectorEnv("mall", num_envs=2)
+    nav = mdrlat.VectorEnv("nav-test", num_envs=2, task="nav")
+    obs, _ = nav.reset(seed=0)
+    assert obs["goal"].shape == (2, 3) and obs["goal"][:, 0].min() > 0

@@ -8,9 +8,12 @@
 use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, GOAL_DIM, LASER_BEAMS, ODOM_HISTORY};
 use mdrlat_geom::{Pose2, Vec2};
 use mdrlat_sim::config::Task;
-use mdrlat_sim::{Collision, SimConfig};
+use mdrlat_sim::{Collision, Observation, SimConfig};
 use numpy::ndarray::{Array1, Array2, Array3};
-use numpy::{IntoPyArray, PyArray3};
+use numpy::{
+    IntoPyArray, PyArray3, PyReadonlyArray1, PyReadwriteArray1, PyReadwriteArray2,
+    PyUntypedArrayMethods,
+};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -39,10 +42,9 @@ pub struct Env {
     config_json: String,
 }
 
-impl Env {
-    /// The current observation as a dict of numpy arrays.
-    fn observation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let obs = self.env.observation();
+/// An observation as a dict of numpy arrays (fresh ones).
+fn observation_dict<'py>(py: Python<'py>, obs: &Observation) -> PyResult<Bound<'py, PyDict>> {
+    {
         let stack = |s: &mdrlat_core::FrameStack| {
             let mut out = vec![0.0f32; FRAME_STACK * s.frame_len()];
             s.write_stacked(&mut out, |from, to| to.copy_from_slice(from));
@@ -64,6 +66,21 @@ impl Env {
         }
         Ok(d)
     }
+}
+
+/// A step's `info` dict entries: velocity, `d_min`, collision kind, goal reached.
+fn step_info(d: &Bound<'_, PyDict>, s: &mdrlat_sim::StepInfo) -> PyResult<()> {
+    d.set_item("velocity", (s.velocity.v, s.velocity.w))?;
+    d.set_item("d_min", s.d_min)?;
+    d.set_item("collision", s.collision.as_ref().map(collision_name))?;
+    d.set_item("reached_goal", s.reached_goal)
+}
+
+impl Env {
+    /// The current observation as a dict of numpy arrays.
+    fn observation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        observation_dict(py, self.env.observation())
+    }
 
     /// The step's `info` dict: pose, velocity, `d_min`, collision kind, goal reached.
     fn info<'py>(
@@ -79,10 +96,7 @@ impl Env {
             d.set_item("goal", (goal.x, goal.y))?;
         }
         if let Some(s) = step {
-            d.set_item("velocity", (s.velocity.v, s.velocity.w))?;
-            d.set_item("d_min", s.d_min)?;
-            d.set_item("collision", s.collision.as_ref().map(collision_name))?;
-            d.set_item("reached_goal", s.reached_goal)?;
+            step_info(&d, s)?;
         }
         Ok(d)
     }
@@ -212,6 +226,239 @@ impl Env {
     }
 }
 
+/// Writes every environment's observation into row `i` of the buffers (metres, stacks
+/// oldest first); `goal` is empty without the navigation task.
+fn write_observations(
+    venv: &mdrlat_sim::VecEnv,
+    laser: &mut [f32],
+    depth: &mut [f32],
+    odom: &mut [f32],
+    goal: &mut [f32],
+) {
+    let copy = |from: &[f32], to: &mut [f32]| to.copy_from_slice(from);
+    venv.with_observations(|all| {
+        let (ls, ds) = (FRAME_STACK * LASER_BEAMS, FRAME_STACK * DEPTH_ROWS * DEPTH_COLS);
+        for (i, obs) in all.iter().enumerate() {
+            obs.laser.write_stacked(&mut laser[i * ls..(i + 1) * ls], copy);
+            obs.depth.write_stacked(&mut depth[i * ds..(i + 1) * ds], copy);
+            for (k, v) in obs.odom.iter().enumerate() {
+                odom[i * 2 * ODOM_HISTORY + 2 * k] = v.v;
+                odom[i * 2 * ODOM_HISTORY + 2 * k + 1] = v.w;
+            }
+            if let (Some(g), false) = (obs.goal, goal.is_empty()) {
+                goal[i * GOAL_DIM..(i + 1) * GOAL_DIM].copy_from_slice(&g);
+            }
+        }
+    });
+}
+
+/// The observation buffers a [`VecEnv`] writes into: `laser` `(N, 4, 512)`, `depth`
+/// `(N, 4, 128, 160)`, `odom` `(N, 6)`, `goal` `(N, 3)` or `(0, 3)`; float32, C order.
+#[derive(FromPyObject)]
+#[pyo3(from_item_all)]
+struct Buffers<'py> {
+    laser: numpy::PyReadwriteArrayDyn<'py, f32>,
+    depth: numpy::PyReadwriteArrayDyn<'py, f32>,
+    odom: PyReadwriteArray2<'py, f32>,
+    goal: PyReadwriteArray2<'py, f32>,
+}
+
+/// The slices of `b`, checked against `n` environments (and `nav`).
+fn buffer_slices<'a>(
+    b: &'a mut Buffers<'_>,
+    n: usize,
+    nav: bool,
+) -> PyResult<(&'a mut [f32], &'a mut [f32], &'a mut [f32], &'a mut [f32])> {
+    let want = [
+        ("laser", n * FRAME_STACK * LASER_BEAMS, b.laser.len()),
+        ("depth", n * FRAME_STACK * DEPTH_ROWS * DEPTH_COLS, b.depth.len()),
+        ("odom", n * 2 * ODOM_HISTORY, b.odom.len()),
+        ("goal", if nav { n * GOAL_DIM } else { 0 }, b.goal.len()),
+    ];
+    for (name, expect, got) in want {
+        if expect != got {
+            return Err(PyValueError::new_err(format!(
+                "buffer '{name}' holds {got} values, {n} environments need {expect}"
+            )));
+        }
+    }
+    let c = |e: numpy::AsSliceError| PyValueError::new_err(format!("buffers: {e}"));
+    Ok((
+        b.laser.as_slice_mut().map_err(c)?,
+        b.depth.as_slice_mut().map_err(c)?,
+        b.odom.as_slice_mut().map_err(c)?,
+        b.goal.as_slice_mut().map_err(c)?,
+    ))
+}
+
+/// N environments stepped in parallel on all cores by the Rust `VecEnv`, the GIL
+/// released, writing into numpy buffers the caller keeps (no arrays made per step).
+/// Finished episodes restart at once (Gymnasium's same-step autoreset); their final
+/// observations and infos are returned.
+#[pyclass(module = "mdrlat._core")]
+pub struct VecEnv {
+    venv: mdrlat_sim::VecEnv,
+    nav: bool,
+    actions: Vec<mdrlat_core::Action>,
+}
+
+#[pymethods]
+impl VecEnv {
+    /// `num_envs` environments in `world` with the settings `config_json` (as [`Env`]),
+    /// on `threads` threads (0: every core).
+    #[new]
+    #[pyo3(signature = (world, config_json = "{}", num_envs = 1, threads = 0))]
+    fn new(world: &str, config_json: &str, num_envs: usize, threads: usize) -> PyResult<Self> {
+        if num_envs == 0 || num_envs > 4096 {
+            return Err(PyValueError::new_err(format!("num_envs {num_envs}: expected 1 to 4096")));
+        }
+        let config: SimConfig = serde_json::from_str(config_json)
+            .map_err(|e| PyValueError::new_err(format!("simulator settings: {e}")))?;
+        config.validate().map_err(|e| PyValueError::new_err(format!("simulator settings: {e}")))?;
+        let loaded = mdrlat_world::load(world).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let nav = config.task == Task::Nav;
+        let scene =
+            std::sync::Arc::new(mdrlat_sim::StaticScene::new(std::sync::Arc::new(loaded), &config));
+        let venv = mdrlat_sim::VecEnv::new(scene, config, num_envs, threads)
+            .map_err(|e| PyValueError::new_err(format!("world '{world}': {e}")))?;
+        Ok(Self { venv, nav, actions: Vec::with_capacity(num_envs) })
+    }
+
+    /// Starts an episode in every environment: environment `i` with `seeds[i]` (`None`:
+    /// its stream goes on), exactly as `Env.reset(seed=seeds[i])`; writes the observations
+    /// into `buffers`. Returns each environment's pose `(x, y, yaw_deg)`.
+    fn reset(
+        &mut self,
+        py: Python<'_>,
+        seeds: Vec<Option<u64>>,
+        mut buffers: Buffers<'_>,
+    ) -> PyResult<Vec<(f32, f32, f32)>> {
+        let n = self.venv.len();
+        if seeds.len() != n {
+            return Err(PyValueError::new_err(format!(
+                "{} seeds for {n} environments",
+                seeds.len()
+            )));
+        }
+        let (laser, depth, odom, goal) = buffer_slices(&mut buffers, n, self.nav)?;
+        let venv = &mut self.venv;
+        py.detach(|| -> Result<(), mdrlat_sim::SimError> {
+            for (i, seed) in seeds.iter().enumerate() {
+                venv.reset_env(i, *seed, None)?;
+            }
+            write_observations(venv, laser, depth, odom, goal);
+            Ok(())
+        })
+        .map_err(sim_error)?;
+        Ok((0..n)
+            .map(|i| {
+                let p = self.venv.env(i).pose();
+                (p.x, p.y, p.yaw.to_degrees())
+            })
+            .collect())
+    }
+
+    /// One step of every environment with `actions[i]` (0–9): writes the observations
+    /// (after any autoreset) into `buffers`, the rewards and flags into `rewards`,
+    /// `terminated`, `truncated`, and each step's `d_min`. Returns, for every environment
+    /// whose episode ended, `(i, final_observation, final_info)`.
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        actions: PyReadonlyArray1<'py, i64>,
+        mut buffers: Buffers<'py>,
+        mut rewards: PyReadwriteArray1<'py, f32>,
+        mut terminated: PyReadwriteArray1<'py, bool>,
+        mut truncated: PyReadwriteArray1<'py, bool>,
+        mut d_min: PyReadwriteArray1<'py, f32>,
+    ) -> PyResult<Vec<(usize, Bound<'py, PyDict>, Bound<'py, PyDict>)>> {
+        let n = self.venv.len();
+        let acts =
+            actions.as_slice().map_err(|e| PyValueError::new_err(format!("actions: {e}")))?;
+        if acts.len() != n {
+            return Err(PyValueError::new_err(format!(
+                "{} actions for {n} environments",
+                acts.len()
+            )));
+        }
+        self.actions.clear();
+        for (i, &a) in acts.iter().enumerate() {
+            let action =
+                usize::try_from(a).ok().and_then(mdrlat_core::Action::new).ok_or_else(|| {
+                    PyValueError::new_err(format!("actions[{i}] = {a}: expected 0 to 9"))
+                })?;
+            self.actions.push(action);
+        }
+        for (name, len) in [
+            ("rewards", rewards.len()),
+            ("terminated", terminated.len()),
+            ("truncated", truncated.len()),
+            ("d_min", d_min.len()),
+        ] {
+            if len != n {
+                return Err(PyValueError::new_err(format!(
+                    "buffer '{name}' holds {len} values, expected {n}"
+                )));
+            }
+        }
+        let c = |e: numpy::AsSliceError| PyValueError::new_err(format!("buffers: {e}"));
+        let (laser, depth, odom, goal) = buffer_slices(&mut buffers, n, self.nav)?;
+        let (rw, te, tr, dm) = (
+            rewards.as_slice_mut().map_err(c)?,
+            terminated.as_slice_mut().map_err(c)?,
+            truncated.as_slice_mut().map_err(c)?,
+            d_min.as_slice_mut().map_err(c)?,
+        );
+        let (venv, actions) = (&mut self.venv, &self.actions);
+        let ended = py
+            .detach(|| -> Result<Vec<(usize, mdrlat_sim::StepInfo)>, mdrlat_sim::SimError> {
+                let steps = venv.step(actions)?;
+                let mut ended = Vec::new();
+                for (i, s) in steps.iter().enumerate() {
+                    (rw[i], te[i], tr[i], dm[i]) =
+                        (s.reward, s.terminated, s.truncated, s.info.d_min);
+                    if s.terminated || s.truncated {
+                        ended.push((i, s.info));
+                    }
+                }
+                write_observations(venv, laser, depth, odom, goal);
+                Ok(ended)
+            })
+            .map_err(sim_error)?;
+        let mut out = Vec::with_capacity(ended.len());
+        for (i, info) in ended {
+            let final_obs = match self.venv.final_observation(i) {
+                Some(o) => observation_dict(py, &o)?,
+                None => PyDict::new(py),
+            };
+            let d = PyDict::new(py);
+            d.set_item("pose", (info.pose.x, info.pose.y, info.pose.yaw.to_degrees()))?;
+            d.set_item("step", info.step)?;
+            step_info(&d, &info)?;
+            out.push((i, final_obs, d));
+        }
+        Ok(out)
+    }
+
+    /// The environments.
+    fn __len__(&self) -> usize {
+        self.venv.len()
+    }
+
+    /// Threads stepping them.
+    #[getter]
+    fn threads(&self) -> usize {
+        self.venv.threads()
+    }
+
+    /// The task: `avoid` or `nav`.
+    #[getter]
+    fn task(&self) -> &'static str {
+        if self.nav { "nav" } else { "avoid" }
+    }
+}
+
 /// The array shapes of an observation: `laser`, `depth`, `odom`, `goal`.
 #[pyfunction]
 fn shapes() -> ((usize, usize), (usize, usize, usize), usize, usize) {
@@ -240,6 +487,7 @@ fn check_task(name: &str) -> PyResult<String> {
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Env>()?;
+    m.add_class::<VecEnv>()?;
     m.add_function(wrap_pyfunction!(shapes, m)?)?;
     m.add_function(wrap_pyfunction!(actions, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_worlds, m)?)?;
