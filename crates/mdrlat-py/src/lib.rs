@@ -263,12 +263,11 @@ struct Buffers<'py> {
     goal: PyReadwriteArray2<'py, f32>,
 }
 
+/// The laser, depth, odometry and goal buffers as slices.
+type Slices<'a> = (&'a mut [f32], &'a mut [f32], &'a mut [f32], &'a mut [f32]);
+
 /// The slices of `b`, checked against `n` environments (and `nav`).
-fn buffer_slices<'a>(
-    b: &'a mut Buffers<'_>,
-    n: usize,
-    nav: bool,
-) -> PyResult<(&'a mut [f32], &'a mut [f32], &'a mut [f32], &'a mut [f32])> {
+fn buffer_slices<'a>(b: &'a mut Buffers<'_>, n: usize, nav: bool) -> PyResult<Slices<'a>> {
     let want = [
         ("laser", n * FRAME_STACK * LASER_BEAMS, b.laser.len()),
         ("depth", n * FRAME_STACK * DEPTH_ROWS * DEPTH_COLS, b.depth.len()),
