@@ -3,9 +3,79 @@
 //! `target/python/` (kept between runs, so later runs only rebuild what changed), then runs
 //! pytest. Without a Python ≥ 3.10 with `venv`, or without PyPI, it says why and skips —
 //! unless `MDRLAT_REQUIRE_PYTHON=1` (CI), where that is a failure.
+//!
+//! It first writes reference networks for the PyTorch module's test: every variant (and a
+//! navigation MDRLAT) freshly initialised from a seed, as `model.safetensors`, with inputs
+//! in metres and the Rust network's Q-values on them (`target/python/qnet/`).
 
+use mdrlat_core::{DEPTH_LEN, FRAME_STACK, GOAL_DIM, LASER_BEAMS, Rng};
+use mdrlat_nn::Variant;
+use mdrlat_nn::burn::prelude::Device;
+use mdrlat_sim::config::Task;
+use mdrlat_train::{GreedyPolicy, Inputs};
 use std::path::{Path, PathBuf};
 use std::process::Command;
+
+/// Rows of the reference inputs.
+const ROWS: usize = 5;
+
+fn write_npy(path: &Path, shape: &[usize], data: &[f32]) {
+    let file = std::fs::File::create(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    mdrlat_core::npy::write_f32(std::io::BufWriter::new(file), shape, data)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+}
+
+/// Reference networks, inputs (metres) and Rust Q-values under `dir`, one folder each.
+fn write_references(dir: &Path) {
+    let device = Device::flex();
+    let mut rng = Rng::seed_from_u64(21);
+    let mut cases: Vec<(Variant, Task)> = Variant::ALL.iter().map(|&v| (v, Task::Avoid)).collect();
+    cases.push((Variant::Mdrlat, Task::Nav));
+    for (i, (variant, task)) in cases.into_iter().enumerate() {
+        let case = dir.join(format!("{variant}-{task}"));
+        std::fs::create_dir_all(&case).expect("reference folder");
+        let policy = GreedyPolicy::untrained(variant, task, 100 + i as u64, &device, 1)
+            .expect("untrained network");
+        mdrlat_train::export::save_safetensors(
+            policy.net(),
+            policy.config(),
+            &case.join("model.safetensors"),
+        )
+        .expect("model");
+        let laser: Vec<f32> =
+            (0..ROWS * FRAME_STACK * LASER_BEAMS).map(|_| rng.range_f32(0.1, 5.6)).collect();
+        // Some pixels without a return (0) and some beyond the 10 m clamp.
+        let depth: Vec<f32> = (0..ROWS * FRAME_STACK * DEPTH_LEN)
+            .map(|k| if k % 17 == 0 { 0.0 } else { rng.range_f32(0.3, 11.0) })
+            .collect();
+        let goal: Vec<f32> = (0..ROWS)
+            .flat_map(|_| {
+                let (d, a) = (rng.range_f32(0.0, 12.0), rng.range_f32(-3.1, 3.1));
+                [d, a.sin(), a.cos()]
+            })
+            .collect();
+        let mut inputs = Inputs { size: ROWS, ..Inputs::default() };
+        if variant.uses_laser() {
+            inputs.laser = vec![0.0; laser.len()];
+            mdrlat_core::normalize_laser(&laser, &mut inputs.laser);
+        }
+        if variant.uses_depth() {
+            inputs.depth = vec![0.0; depth.len()];
+            mdrlat_core::normalize_depth(&depth, &mut inputs.depth);
+        }
+        if task == Task::Nav {
+            inputs.goal = goal
+                .chunks_exact(GOAL_DIM)
+                .flat_map(|g| mdrlat_core::normalize_goal(&[g[0], g[1], g[2]]))
+                .collect();
+        }
+        let q = policy.q_values(&inputs).expect("Q-values");
+        write_npy(&case.join("laser.npy"), &[ROWS, FRAME_STACK, LASER_BEAMS], &laser);
+        write_npy(&case.join("depth.npy"), &[ROWS, FRAME_STACK, 128, 160], &depth);
+        write_npy(&case.join("goal.npy"), &[ROWS, GOAL_DIM], &goal);
+        write_npy(&case.join("q.npy"), &[ROWS, 10], &q);
+    }
+}
 
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().expect("workspace root")
@@ -80,10 +150,13 @@ fn the_python_package_builds_installs_and_passes_its_tests() {
         .env("CARGO_TARGET_DIR", base.join("cargo"))
         .current_dir(&root))
     .unwrap_or_else(|e| panic!("pip install ./python: {e}"));
+    let references = base.join("qnet");
+    write_references(&references);
     // Run from outside the source tree, so `import mdrlat` is the installed package.
     run(Command::new(bin.join("pytest"))
-        .args(["-q", "-p", "no:cacheprovider"])
+        .args(["-q", "-p", "no:cacheprovider", "-rs"])
         .arg(root.join("python/tests"))
+        .env("MDRLAT_QNET_REFERENCES", &references)
         .current_dir(&base))
     .unwrap_or_else(|e| panic!("{e}"));
 }
