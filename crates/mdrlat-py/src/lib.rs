@@ -28,6 +28,16 @@ fn sim_error(e: mdrlat_sim::SimError) -> PyErr {
     PyRuntimeError::new_err(e.to_string())
 }
 
+/// The world `spec` names and the settings `config_json` holds, checked: a `ValueError`
+/// naming the file, the key or the value otherwise.
+fn load(spec: &str, config_json: &str) -> PyResult<(mdrlat_world::World, SimConfig)> {
+    let config: SimConfig = serde_json::from_str(config_json)
+        .map_err(|e| PyValueError::new_err(format!("simulator settings: {e}")))?;
+    config.validate().map_err(|e| PyValueError::new_err(format!("simulator settings: {e}")))?;
+    let world = mdrlat_world::load(spec).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok((world, config))
+}
+
 /// One simulated robot in one world (paper section 2.1; SPEC §2).
 #[pyclass(module = "mdrlat._core")]
 pub struct Env {
@@ -110,10 +120,7 @@ impl Env {
     #[new]
     #[pyo3(signature = (world, config_json = "{}"))]
     fn new(world: &str, config_json: &str) -> PyResult<Self> {
-        let config: SimConfig = serde_json::from_str(config_json)
-            .map_err(|e| PyValueError::new_err(format!("simulator settings: {e}")))?;
-        config.validate().map_err(|e| PyValueError::new_err(format!("simulator settings: {e}")))?;
-        let loaded = mdrlat_world::load(world).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let (loaded, config) = load(world, config_json)?;
         let env = mdrlat_sim::Env::from_world(loaded, config)
             .map_err(|e| PyValueError::new_err(format!("world '{world}': {e}")))?;
         let trail = vec![env.pose().position()];
@@ -311,10 +318,7 @@ impl VecEnv {
         if num_envs == 0 || num_envs > 4096 {
             return Err(PyValueError::new_err(format!("num_envs {num_envs}: expected 1 to 4096")));
         }
-        let config: SimConfig = serde_json::from_str(config_json)
-            .map_err(|e| PyValueError::new_err(format!("simulator settings: {e}")))?;
-        config.validate().map_err(|e| PyValueError::new_err(format!("simulator settings: {e}")))?;
-        let loaded = mdrlat_world::load(world).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let (loaded, config) = load(world, config_json)?;
         let nav = config.task == Task::Nav;
         let scene =
             std::sync::Arc::new(mdrlat_sim::StaticScene::new(std::sync::Arc::new(loaded), &config));
