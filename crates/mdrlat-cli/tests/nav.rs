@@ -180,6 +180,11 @@ fn a_goal_conditioned_network_trains_and_is_evaluated_on_navigation() {
         dir.join("e").to_str().expect("utf-8"),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
+    // The ROS node has no goal to give it.
+    assert_clean_failure(
+        &mdrlat(&["ros", "--checkpoint", r]),
+        &["trained for navigation", "has no goal to give it"],
+    );
     // A world without goal regions cannot train navigation.
     let o = mdrlat(&[
         "train",

@@ -224,10 +224,15 @@ pub fn run(a: &Args) -> Result<()> {
             .map_err(anyhow::Error::msg)?,
     };
     // The node avoids obstacles; it has no goal to give a navigation network.
-    if let Some(path) = &a.checkpoint {
-        policy
-            .check_task(Task::Avoid, &format!("--checkpoint {}", path.display()))
-            .map_err(anyhow::Error::msg)?;
+    if let Some(path) = &a.checkpoint
+        && policy.task() != Task::Avoid
+    {
+        bail!(
+            "--checkpoint {}: a {} network trained for navigation (a goal input); the ROS node \
+             runs obstacle avoidance and has no goal to give it",
+            path.display(),
+            policy.variant()
+        );
     }
     if a.bf16 {
         policy = policy.with_bf16_weights().map_err(anyhow::Error::msg).context("--bf16")?;
