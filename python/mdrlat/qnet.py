@@ -110,13 +110,15 @@ class QNet(nn.Module):
             if depth is None:
                 raise ValueError(f"a {self.variant} network reads the depth camera: give depth")
             d = as_tensor(depth)
-            d = d if normalised else d.clamp(0.0, DEPTH_MAX_M) / DEPTH_SCALE_M
+            # As mdrlat_core::normalize_depth: NaN (no return) reads 0.
+            d = d if normalised else torch.nan_to_num(d, nan=0.0).clamp(0.0, DEPTH_MAX_M) / DEPTH_SCALE_M
             d_feat = self._stream(self.depth, d)
         if uses_laser:
             if laser is None:
                 raise ValueError(f"a {self.variant} network reads the laser: give laser")
             l = as_tensor(laser)
-            l = l if normalised else l / LASER_MAX_M
+            # As mdrlat_core::normalize_laser: a non-finite range reads 1.0, "nothing seen".
+            l = l if normalised else torch.where(torch.isfinite(l), l / LASER_MAX_M, 1.0)
             l_feat = self._stream(self.laser, l)
         if uses_depth:
             parts.append(d_feat)
@@ -132,6 +134,9 @@ class QNet(nn.Module):
             g = as_tensor(goal)
             if not normalised:
                 g = torch.cat([g[:, :1] / GOAL_NORM_M, g[:, 1:]], dim=1)
+                # As mdrlat_core::normalize_goal: a goal with a non-finite part reads [1, 0, 1].
+                bad = ~torch.isfinite(g).all(dim=1, keepdim=True)
+                g = torch.where(bad, torch.tensor([1.0, 0.0, 1.0]), g)
             parts.append(g)
         return torch.cat(parts, dim=1)
 

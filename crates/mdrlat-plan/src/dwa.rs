@@ -123,13 +123,16 @@ impl Dwa {
         if goal_local.length() <= c.goal_tolerance_m {
             return Velocity::new(0.0, 0.0);
         }
-        // Only the plan near the robot is scored: from its point nearest the robot, as far
-        // along as the point steered for plus a roll-out's reach (a roll-out ends within
-        // `v_max · horizon` of the robot, so a later stretch of a plan that does not loop
-        // back cannot be nearer its end). The rest is never transformed.
-        let (first, _) = nearest_on_polyline(plan, pose.position());
+        // Only the plan near the robot is scored: from the segment before the one nearest
+        // the robot (a tie at a shared vertex may fall either way in the robot's frame) to
+        // as far along as the point steered for plus a roll-out's reach, counted from the
+        // nearest segment's end (a roll-out ends within `v_max · horizon` of the robot, so a
+        // later stretch of a plan that does not double back cannot be nearer its end). The
+        // rest is never transformed.
+        let (nearest, _) = nearest_on_polyline(plan, pose.position());
+        let first = nearest.saturating_sub(1);
         let window_m = c.lookahead_m + 2.0 * l.v_max * c.horizon_s;
-        let last = window_end(plan, first, window_m);
+        let last = window_end(plan, (nearest + 1).min(plan.len() - 1), window_m);
         let local: Vec<Vec2> = plan[first..=last].iter().map(|&p| pose.to_local(p)).collect();
         let (target, ahead) = lookahead(&local, c.lookahead_m);
         // Only the points a roll-out can reach matter.
@@ -377,6 +380,16 @@ mod tests {
 
     fn wall_at_x(x: f32) -> Vec<Vec2> {
         (0..=80).map(|i| Vec2::new(x, -2.0 + i as f32 * 0.05)).collect()
+    }
+
+    #[test]
+    fn near_the_end_of_a_long_segment_it_steers_for_the_next_one() {
+        // Robot 0.1 m before an L's corner: the point steered for lies up the second leg,
+        // beyond the segment the robot is on.
+        let dwa = Dwa::new(DwaConfig::default(), Limits::table_1(1.0, 2.0));
+        let plan = [Vec2::new(0.0, 0.0), Vec2::new(3.0, 0.0), Vec2::new(3.0, 3.0)];
+        let cmd = dwa.command(Pose2::new(2.9, 0.0, 0.0), Velocity::new(0.3, 0.0), &plan, &[]);
+        assert!(cmd.w > 0.1, "turns left into the second leg: {cmd:?}");
     }
 
     #[test]

@@ -288,6 +288,15 @@ fn buffer_slices<'a>(b: &'a mut Buffers<'_>, n: usize, nav: bool) -> PyResult<Sl
             )));
         }
     }
+    let c_order = [
+        ("laser", b.laser.is_c_contiguous()),
+        ("depth", b.depth.is_c_contiguous()),
+        ("odom", b.odom.is_c_contiguous()),
+        ("goal", b.goal.is_c_contiguous()),
+    ];
+    if let Some((name, _)) = c_order.iter().find(|(_, c)| !c) {
+        return Err(PyValueError::new_err(format!("buffer '{name}' is not C-contiguous")));
+    }
     let c = |e: numpy::AsSliceError| PyValueError::new_err(format!("buffers: {e}"));
     Ok((
         b.laser.as_slice_mut().map_err(c)?,
@@ -349,10 +358,11 @@ impl VecEnv {
             for (i, seed) in seeds.iter().enumerate() {
                 venv.reset_env(i, *seed, None)?;
             }
-            write_observations(venv, laser, depth, odom, goal);
             Ok(())
         })
         .map_err(sim_error)?;
+        // With the GIL held: no other Python thread sees the buffers half written.
+        write_observations(venv, laser, depth, odom, goal);
         Ok((0..n)
             .map(|i| {
                 let p = self.venv.env(i).pose();
@@ -414,21 +424,17 @@ impl VecEnv {
             d_min.as_slice_mut().map_err(c)?,
         );
         let (venv, actions) = (&mut self.venv, &self.actions);
-        let ended = py
-            .detach(|| -> Result<Vec<(usize, mdrlat_sim::StepInfo)>, mdrlat_sim::SimError> {
-                let steps = venv.step(actions)?;
-                let mut ended = Vec::new();
-                for (i, s) in steps.iter().enumerate() {
-                    (rw[i], te[i], tr[i], dm[i]) =
-                        (s.reward, s.terminated, s.truncated, s.info.d_min);
-                    if s.terminated || s.truncated {
-                        ended.push((i, s.info));
-                    }
-                }
-                write_observations(venv, laser, depth, odom, goal);
-                Ok(ended)
-            })
-            .map_err(sim_error)?;
+        // The simulation runs without the GIL; the buffers, which Python code can see, are
+        // written after it is taken back.
+        let steps = py.detach(|| venv.step(actions).map(<[_]>::to_vec)).map_err(sim_error)?;
+        let mut ended = Vec::new();
+        for (i, s) in steps.iter().enumerate() {
+            (rw[i], te[i], tr[i], dm[i]) = (s.reward, s.terminated, s.truncated, s.info.d_min);
+            if s.terminated || s.truncated {
+                ended.push((i, s.info));
+            }
+        }
+        write_observations(venv, laser, depth, odom, goal);
         let mut out = Vec::with_capacity(ended.len());
         for (i, info) in ended {
             let final_obs = match self.venv.final_observation(i) {

@@ -430,7 +430,10 @@ pub fn navigation_rows(plan: &Plan) -> (Vec<NavSummary>, Vec<String>) {
                 .filter(|(w, _)| w == world || *w == stem)
                 .map(|(_, r)| r.clone())
                 .collect();
-            if !navs.is_empty() {
+            if navs.is_empty() {
+                missing
+                    .push(format!("{}: no navigation.csv rows for world '{world}'", method.name()));
+            } else {
                 rows.push(NavSummary::new(&method.name(), world, &navs));
             }
         }

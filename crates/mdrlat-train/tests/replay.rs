@@ -133,3 +133,65 @@ fn short_episodes_still_fill_the_buffer() {
     }
     assert_eq!(buf.len(), capacity);
 }
+
+/// A small laser-only buffer of `n` chained transitions, with goals or without.
+fn small_buffer(n: usize, goals: bool) -> ReplayBuffer {
+    let mut buf = ReplayBuffer::new(16, 64, true, false).with_goals(goals);
+    let laser = vec![1.5f32; LASER_BEAMS];
+    let first = buf.push_frame(&laser, &[]);
+    let mut stack = [first; FRAME_STACK];
+    for k in 0..n {
+        let id = buf.push_frame(&laser, &[]);
+        let next = [stack[1], stack[2], stack[3], id];
+        let g = k as f32;
+        buf.push(Transition {
+            obs: stack,
+            next,
+            action: (k % 10) as u8,
+            reward: 0.5,
+            terminated: false,
+            odom: [0.1; 6],
+            goal: [g, 0.6, 0.8],
+            next_goal: [g + 0.5, 0.0, 1.0],
+        });
+        stack = next;
+    }
+    buf
+}
+
+#[test]
+fn goals_round_trip_and_a_corrupt_goal_file_is_refused() {
+    let buf = small_buffer(5, true);
+    let mut bytes = Vec::new();
+    buf.write_to(&mut bytes).expect("write");
+    assert_eq!(&bytes[..8], b"MDRLRB02");
+    let read = |b: &[u8], goals: bool| {
+        ReplayBuffer::read_from(b, b.len() as u64, 16, 64, true, false, goals)
+    };
+    let back = read(&bytes, true).expect("read");
+    for i in 0..5 {
+        assert_eq!(back.get(i), buf.get(i), "transition {i}");
+    }
+    let mut batch = Batch::default();
+    back.write_batch(&[4, 0], &mut batch);
+    assert_eq!(batch.goal, [0.4, 0.6, 0.8, 0.0, 0.6, 0.8]);
+    assert_eq!(batch.next_goal, [0.45, 0.0, 1.0, 0.05, 0.0, 1.0]);
+    // The run must want goals; the flag byte must be 1; the length must fit.
+    let e = read(&bytes, false).expect_err("a run without goals").to_string();
+    assert!(e.contains("with goals (navigation)"), "{e}");
+    let mut flag = bytes.clone();
+    flag[8 + 32 + 2] = 7;
+    let e = read(&flag, true).expect_err("bad flag").to_string();
+    assert!(e.contains("bad goal flag 7"), "{e}");
+    let cut = &bytes[..bytes.len() - 4];
+    let e = read(cut, true).expect_err("truncated").to_string();
+    assert!(e.contains("truncated or corrupt"), "{e}");
+    // Obstacle avoidance keeps the old format byte for byte: no flag, no goals.
+    let plain = small_buffer(5, false);
+    let mut old = Vec::new();
+    plain.write_to(&mut old).expect("write");
+    assert_eq!(&old[..8], b"MDRLRB01");
+    assert_eq!(bytes.len() - old.len(), 1 + 5 * 4 * 2 * 3, "one flag byte, 24 goal bytes each");
+    let e = read(&old, true).expect_err("a navigation run").to_string();
+    assert!(e.contains("without goals"), "{e}");
+}
