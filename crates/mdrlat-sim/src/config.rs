@@ -57,6 +57,17 @@ impl Task {
         }
     }
 
+    /// The task of a network whose goal input has `goal_dim` values (none: obstacle
+    /// avoidance).
+    pub fn of_goal_dim(goal_dim: usize) -> Task {
+        if goal_dim > 0 { Task::Nav } else { Task::Avoid }
+    }
+
+    /// Whether it is obstacle avoidance (the default; files omit it then).
+    pub fn is_avoid(&self) -> bool {
+        *self == Task::Avoid
+    }
+
     /// Length of the goal input a network of this task reads (0: none).
     pub fn goal_dim(self) -> usize {
         match self {

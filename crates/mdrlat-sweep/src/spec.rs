@@ -30,7 +30,7 @@ pub struct Sweep {
     pub description: String,
     /// The task every run trains and is evaluated on: `avoid` (Table 2; the default) or
     /// `nav` (the paper's navigation extension, Fig. 9).
-    #[serde(default, skip_serializing_if = "is_avoid")]
+    #[serde(default, skip_serializing_if = "Task::is_avoid")]
     pub task: Task,
     /// Network variants to train (each trained once per seed).
     pub variants: Vec<Variant>,
@@ -77,10 +77,6 @@ pub struct EvalSpec {
     /// Episodes drawn for Figs. 6/7, or start/goal pairs for Fig. 9 (0: none).
     #[serde(default)]
     pub figures: u32,
-}
-
-fn is_avoid(t: &Task) -> bool {
-    *t == Task::Avoid
 }
 
 fn default_world() -> String {

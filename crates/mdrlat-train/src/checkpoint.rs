@@ -64,7 +64,7 @@ pub struct Meta {
     pub variant: Variant,
     /// The task it learns (absent for obstacle avoidance: such checkpoints' `meta.json` is
     /// as before navigation existed).
-    #[serde(default, skip_serializing_if = "is_avoid")]
+    #[serde(default, skip_serializing_if = "Task::is_avoid")]
     pub task: Task,
     /// Environment steps done.
     pub step: u64,
@@ -90,10 +90,6 @@ pub struct Meta {
     pub replay_bytes: u64,
     /// FNV-1a 64 of `replay.bin`.
     pub replay_checksum: u64,
-}
-
-fn is_avoid(t: &Task) -> bool {
-    *t == Task::Avoid
 }
 
 /// FNV-1a over everything that passes through.

@@ -300,7 +300,7 @@ impl Learner {
 
     /// The task it learns: navigation when the network reads a goal.
     pub fn task(&self) -> Task {
-        if self.net_config.goal_dim > 0 { Task::Nav } else { Task::Avoid }
+        Task::of_goal_dim(self.net_config.goal_dim)
     }
 
     /// The network's settings.

@@ -248,7 +248,7 @@ impl GreedyPolicy {
 
     /// The task it was trained for: navigation when the network reads a goal.
     pub fn task(&self) -> Task {
-        if self.config.goal_dim > 0 { Task::Nav } else { Task::Avoid }
+        Task::of_goal_dim(self.config.goal_dim)
     }
 
     /// The network's settings.
