@@ -182,3 +182,32 @@ def test_the_vector_env_refuses_bad_input():
     nav = mdrlat.VectorEnv("nav-test", num_envs=2, task="nav")
     obs, _ = nav.reset(seed=0)
     assert obs["goal"].shape == (2, 3) and obs["goal"][:, 0].min() > 0
+
+
+def test_the_vector_env_reports_final_observations_as_gymnasium_does():
+    # `_add_finals` is a one-pass copy of Gymnasium's `VectorEnv._add_info`: same keys,
+    # masks, dtypes and values.
+    vec = mdrlat.VectorEnv("crowd", num_envs=4)
+    vec.reset(seed=3)
+    rng = np.random.default_rng(1)
+    checked = 0
+    for _ in range(400):
+        _, _, term, trunc, infos = vec.step(rng.integers(10, size=4))
+        if not (term | trunc).any():
+            continue
+        expect: dict = {}
+        for i in np.flatnonzero(term | trunc):
+            info = {k: v[i] for k, v in infos["final_info"].items() if not k.startswith("_")}
+            info = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in info.items()}
+            expect = vec._add_info(expect, {"final_obs": infos["final_obs"][i], "final_info": info}, i)
+        assert sorted(infos) == sorted(["d_min", "_d_min", *expect])
+        for key in ("_final_obs", "_final_info"):
+            assert np.array_equal(infos[key], expect[key])
+        for key, value in expect["final_info"].items():
+            got = infos["final_info"][key]
+            assert got.dtype == value.dtype, key
+            assert all(a == b for a, b in zip(got, value)), key
+        assert all((a is None) == (b is None) for a, b in zip(infos["final_obs"], expect["final_obs"]))
+        checked += 1
+    assert checked > 0, "no episode ended"
+    vec.close()

@@ -5,7 +5,9 @@
 //! (`python/mdrlat/`); this module only moves data. Every failure is a Python exception
 //! naming what failed; nothing panics across the boundary.
 
-use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, GOAL_DIM, LASER_BEAMS, ODOM_HISTORY};
+use mdrlat_core::{
+    DEPTH_COLS, DEPTH_LEN, DEPTH_ROWS, FRAME_STACK, GOAL_DIM, LASER_BEAMS, ODOM_HISTORY,
+};
 use mdrlat_geom::{Pose2, Vec2};
 use mdrlat_sim::config::Task;
 use mdrlat_sim::{Collision, Observation, SimConfig};
@@ -233,34 +235,59 @@ impl Env {
     }
 }
 
-/// Writes every environment's observation into row `i` of the buffers (metres, stacks
-/// oldest first); `goal` is empty without the navigation task.
-fn write_observations(
-    venv: &mdrlat_sim::VecEnv,
-    laser: &mut [f32],
-    depth: &mut [f32],
-    odom: &mut [f32],
-    goal: &mut [f32],
-) {
-    let copy = |from: &[f32], to: &mut [f32]| to.copy_from_slice(from);
-    venv.with_observations(|all| {
-        let (ls, ds) = (FRAME_STACK * LASER_BEAMS, FRAME_STACK * DEPTH_ROWS * DEPTH_COLS);
-        for (i, obs) in all.iter().enumerate() {
-            obs.laser.write_stacked(&mut laser[i * ls..(i + 1) * ls], copy);
-            obs.depth.write_stacked(&mut depth[i * ds..(i + 1) * ds], copy);
-            for (k, v) in obs.odom.iter().enumerate() {
-                odom[i * 2 * ODOM_HISTORY + 2 * k] = v.v;
-                odom[i * 2 * ODOM_HISTORY + 2 * k + 1] = v.w;
-            }
-            if let (Some(g), false) = (obs.goal, goal.is_empty()) {
-                goal[i * GOAL_DIM..(i + 1) * GOAL_DIM].copy_from_slice(&g);
-            }
-        }
-    });
+/// Frames of each environment's window in the vector env's laser and depth buffers: an
+/// observation is a view of 4 consecutive frames, which slides on by one frame a step, so
+/// a step writes one new frame per environment instead of moving the whole stack (a full
+/// stack only after a reset, and when the window reaches the end: every
+/// `WINDOW_FRAMES − FRAME_STACK` steps).
+const WINDOW_FRAMES: usize = 32;
+
+/// One observation's place in numpy buffers: `laser` and `depth` a whole stack (`frames`
+/// = 4) or an environment's window buffer (`frames` = [`WINDOW_FRAMES`]), `odom`, and
+/// `goal` (empty without the navigation task).
+struct ObsSlot<'a> {
+    laser: &'a mut [f32],
+    depth: &'a mut [f32],
+    odom: &'a mut [f32],
+    goal: &'a mut [f32],
 }
 
-/// The observation buffers a [`VecEnv`] writes into: `laser` `(N, 4, 512)`, `depth`
-/// `(N, 4, 128, 160)`, `odom` `(N, 6)`, `goal` `(N, 3)` or `(0, 3)`; float32, C order.
+impl ObsSlot<'_> {
+    /// Writes `obs` (metres, stacks oldest first) with its stacks starting at frame
+    /// `offset`: the whole stacks where `full`, else only the newest frames (the other
+    /// three are there from the step before, one frame earlier).
+    fn write(&mut self, obs: &Observation, offset: usize, full: bool) {
+        let copy = |from: &[f32], to: &mut [f32]| to.copy_from_slice(from);
+        for (stack, buf) in [(&obs.laser, &mut *self.laser), (&obs.depth, &mut *self.depth)] {
+            let n = stack.frame_len();
+            if full {
+                stack.write_stacked(&mut buf[offset * n..(offset + FRAME_STACK) * n], copy);
+            } else {
+                let newest = offset + FRAME_STACK - 1;
+                buf[newest * n..(newest + 1) * n].copy_from_slice(stack.latest());
+            }
+        }
+        for (k, v) in obs.odom.iter().enumerate() {
+            (self.odom[2 * k], self.odom[2 * k + 1]) = (v.v, v.w);
+        }
+        if let (Some(g), false) = (obs.goal, self.goal.is_empty()) {
+            self.goal.copy_from_slice(&g);
+        }
+    }
+}
+
+/// An environment's places in the buffers: its current observation's window and its
+/// last episode's final observation.
+struct EnvSlot<'a> {
+    now: ObsSlot<'a>,
+    last: ObsSlot<'a>,
+}
+
+/// Numpy buffers a [`VecEnv`] writes into (float32, C order): the current observations,
+/// with the frame windows `laser` `(N, 32, 512)` and `depth` `(N, 32, 128, 160)` (see
+/// [`WINDOW_FRAMES`]), `odom` `(N, 6)`, `goal` `(N, 3)` or `(0, 3)`; and the final
+/// observations of ended episodes, `final_laser` `(N, 4, 512)`, `final_depth` `(N, 4, 128,
+/// 160)`, `final_odom`, `final_goal`.
 #[derive(FromPyObject)]
 #[pyo3(from_item_all)]
 struct Buffers<'py> {
@@ -268,53 +295,78 @@ struct Buffers<'py> {
     depth: numpy::PyReadwriteArrayDyn<'py, f32>,
     odom: PyReadwriteArray2<'py, f32>,
     goal: PyReadwriteArray2<'py, f32>,
+    final_laser: numpy::PyReadwriteArrayDyn<'py, f32>,
+    final_depth: numpy::PyReadwriteArrayDyn<'py, f32>,
+    final_odom: PyReadwriteArray2<'py, f32>,
+    final_goal: PyReadwriteArray2<'py, f32>,
 }
 
-/// The laser, depth, odometry and goal buffers as slices.
-type Slices<'a> = (&'a mut [f32], &'a mut [f32], &'a mut [f32], &'a mut [f32]);
-
-/// The slices of `b`, checked against `n` environments (and `nav`).
-fn buffer_slices<'a>(b: &'a mut Buffers<'_>, n: usize, nav: bool) -> PyResult<Slices<'a>> {
-    let want = [
-        ("laser", n * FRAME_STACK * LASER_BEAMS, b.laser.len()),
-        ("depth", n * FRAME_STACK * DEPTH_ROWS * DEPTH_COLS, b.depth.len()),
-        ("odom", n * 2 * ODOM_HISTORY, b.odom.len()),
-        ("goal", if nav { n * GOAL_DIM } else { 0 }, b.goal.len()),
-    ];
-    for (name, expect, got) in want {
-        if expect != got {
-            return Err(PyValueError::new_err(format!(
-                "buffer '{name}' holds {got} values, {n} environments need {expect}"
-            )));
-        }
+/// A C-order buffer as a slice of `n` rows of `row` values each.
+fn rows<'a, D: numpy::ndarray::Dimension>(
+    name: &str,
+    a: &'a mut numpy::PyReadwriteArray<'_, f32, D>,
+    n: usize,
+    row: usize,
+) -> PyResult<std::slice::ChunksExactMut<'a, f32>> {
+    if a.len() != n * row {
+        return Err(PyValueError::new_err(format!(
+            "buffer '{name}' holds {} values, {n} environments need {}",
+            a.len(),
+            n * row
+        )));
     }
-    let c_order = [
-        ("laser", b.laser.is_c_contiguous()),
-        ("depth", b.depth.is_c_contiguous()),
-        ("odom", b.odom.is_c_contiguous()),
-        ("goal", b.goal.is_c_contiguous()),
-    ];
-    if let Some((name, _)) = c_order.iter().find(|(_, c)| !c) {
+    if !a.is_c_contiguous() {
         return Err(PyValueError::new_err(format!("buffer '{name}' is not C-contiguous")));
     }
-    let c = |e: numpy::AsSliceError| PyValueError::new_err(format!("buffers: {e}"));
-    Ok((
-        b.laser.as_slice_mut().map_err(c)?,
-        b.depth.as_slice_mut().map_err(c)?,
-        b.odom.as_slice_mut().map_err(c)?,
-        b.goal.as_slice_mut().map_err(c)?,
-    ))
+    let s = a.as_slice_mut().map_err(|e| PyValueError::new_err(format!("buffer '{name}': {e}")))?;
+    // `chunks_exact_mut(0)` panics; an empty buffer (no goals) has no rows.
+    Ok(s.chunks_exact_mut(row.max(1)))
+}
+
+/// Every environment's slots in `b`, checked against `n` environments (and `nav`).
+fn env_slots<'a>(b: &'a mut Buffers<'_>, n: usize, nav: bool) -> PyResult<Vec<EnvSlot<'a>>> {
+    let (laser, depth, odom) = (LASER_BEAMS, DEPTH_LEN, 2 * ODOM_HISTORY);
+    let goal = if nav { GOAL_DIM } else { 0 };
+    let mut now_l = rows("laser", &mut b.laser, n, WINDOW_FRAMES * laser)?;
+    let mut now_d = rows("depth", &mut b.depth, n, WINDOW_FRAMES * depth)?;
+    let mut now_o = rows("odom", &mut b.odom, n, odom)?;
+    let mut now_g = rows("goal", &mut b.goal, n, goal)?;
+    let mut last_l = rows("final_laser", &mut b.final_laser, n, FRAME_STACK * laser)?;
+    let mut last_d = rows("final_depth", &mut b.final_depth, n, FRAME_STACK * depth)?;
+    let mut last_o = rows("final_odom", &mut b.final_odom, n, odom)?;
+    let mut last_g = rows("final_goal", &mut b.final_goal, n, goal)?;
+    // A goal-less buffer has no rows: its slots get empty goals.
+    let mut next = || -> Option<EnvSlot<'a>> {
+        Some(EnvSlot {
+            now: ObsSlot {
+                laser: now_l.next()?,
+                depth: now_d.next()?,
+                odom: now_o.next()?,
+                goal: now_g.next().unwrap_or_default(),
+            },
+            last: ObsSlot {
+                laser: last_l.next()?,
+                depth: last_d.next()?,
+                odom: last_o.next()?,
+                goal: last_g.next().unwrap_or_default(),
+            },
+        })
+    };
+    (0..n).map(|_| next().ok_or_else(|| PyRuntimeError::new_err("buffers: too few rows"))).collect()
 }
 
 /// N environments stepped in parallel on all cores by the Rust `VecEnv`, the GIL
-/// released, writing into numpy buffers the caller keeps (no arrays made per step).
-/// Finished episodes restart at once (Gymnasium's same-step autoreset); their final
-/// observations and infos are returned.
+/// released, writing into numpy buffers the caller keeps (no arrays made per step): each
+/// environment's thread writes its observations right after its step. Finished episodes
+/// restart at once (Gymnasium's same-step autoreset); their final observations go to the
+/// `final_*` buffers.
 #[pyclass(module = "mdrlat._core")]
 pub struct VecEnv {
     venv: mdrlat_sim::VecEnv,
     nav: bool,
     actions: Vec<mdrlat_core::Action>,
+    /// Where the observations' 4-frame windows start in the laser and depth buffers.
+    offset: usize,
 }
 
 #[pymethods]
@@ -333,12 +385,13 @@ impl VecEnv {
             std::sync::Arc::new(mdrlat_sim::StaticScene::new(std::sync::Arc::new(loaded), &config));
         let venv = mdrlat_sim::VecEnv::new(scene, config, num_envs, threads)
             .map_err(|e| PyValueError::new_err(format!("world '{world}': {e}")))?;
-        Ok(Self { venv, nav, actions: Vec::with_capacity(num_envs) })
+        Ok(Self { venv, nav, actions: Vec::with_capacity(num_envs), offset: 0 })
     }
 
     /// Starts an episode in every environment: environment `i` with `seeds[i]` (`None`:
     /// its stream goes on), exactly as `Env.reset(seed=seeds[i])`; writes the observations
-    /// into `buffers`. Returns each environment's pose `(x, y, yaw_deg)`.
+    /// into `buffers` (windows at frame 0). Returns each environment's pose `(x, y,
+    /// yaw_deg)`.
     fn reset(
         &mut self,
         py: Python<'_>,
@@ -352,7 +405,7 @@ impl VecEnv {
                 seeds.len()
             )));
         }
-        let (laser, depth, odom, goal) = buffer_slices(&mut buffers, n, self.nav)?;
+        let mut slots = env_slots(&mut buffers, n, self.nav)?;
         let venv = &mut self.venv;
         py.detach(|| -> Result<(), mdrlat_sim::SimError> {
             for (i, seed) in seeds.iter().enumerate() {
@@ -361,8 +414,10 @@ impl VecEnv {
             Ok(())
         })
         .map_err(sim_error)?;
-        // With the GIL held: no other Python thread sees the buffers half written.
-        write_observations(venv, laser, depth, odom, goal);
+        self.offset = 0;
+        for (i, slot) in slots.iter_mut().enumerate() {
+            slot.now.write(&self.venv.observation(i), 0, true);
+        }
         Ok((0..n)
             .map(|i| {
                 let p = self.venv.env(i).pose();
@@ -373,8 +428,12 @@ impl VecEnv {
 
     /// One step of every environment with `actions[i]` (0–9): writes the observations
     /// (after any autoreset) into `buffers`, the rewards and flags into `rewards`,
-    /// `terminated`, `truncated`, and each step's `d_min`. Returns, for every environment
-    /// whose episode ended, `(i, final_observation, final_info)`.
+    /// `terminated`, `truncated`, and each step's `d_min`. The buffers are written while
+    /// the step runs, without the GIL: do not read them from another thread meanwhile.
+    /// Returns the frame at which the observations' windows now start (frames `offset..offset
+    /// + 4` of the laser and depth buffers; the last step's windows are unchanged until the
+    /// buffers wrap) and, for every environment whose episode ended, `(i, final_info)` (its
+    /// final observation is row `i` of the `final_*` buffers).
     #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn step<'py>(
         &mut self,
@@ -385,7 +444,7 @@ impl VecEnv {
         mut terminated: PyReadwriteArray1<'py, bool>,
         mut truncated: PyReadwriteArray1<'py, bool>,
         mut d_min: PyReadwriteArray1<'py, f32>,
-    ) -> PyResult<Vec<(usize, Bound<'py, PyDict>, Bound<'py, PyDict>)>> {
+    ) -> PyResult<(usize, Vec<(usize, Bound<'py, PyDict>)>)> {
         let n = self.venv.len();
         let acts =
             actions.as_slice().map_err(|e| PyValueError::new_err(format!("actions: {e}")))?;
@@ -416,38 +475,43 @@ impl VecEnv {
             }
         }
         let c = |e: numpy::AsSliceError| PyValueError::new_err(format!("buffers: {e}"));
-        let (laser, depth, odom, goal) = buffer_slices(&mut buffers, n, self.nav)?;
+        let mut slots = env_slots(&mut buffers, n, self.nav)?;
         let (rw, te, tr, dm) = (
             rewards.as_slice_mut().map_err(c)?,
             terminated.as_slice_mut().map_err(c)?,
             truncated.as_slice_mut().map_err(c)?,
             d_min.as_slice_mut().map_err(c)?,
         );
+        // The windows slide on by a frame, or start again from the front of the buffers.
+        let wrap = self.offset + 1 + FRAME_STACK > WINDOW_FRAMES;
+        let offset = if wrap { 0 } else { self.offset + 1 };
+        let write = move |slot: &mut EnvSlot<'_>,
+                          _: &mdrlat_sim::VecStep,
+                          last: Option<&Observation>,
+                          now: &Observation| {
+            if let Some(last) = last {
+                slot.last.write(last, 0, true);
+            }
+            slot.now.write(now, offset, wrap || last.is_some());
+        };
         let (venv, actions) = (&mut self.venv, &self.actions);
-        // The simulation runs without the GIL; the buffers, which Python code can see, are
-        // written after it is taken back.
-        let steps = py.detach(|| venv.step(actions).map(<[_]>::to_vec)).map_err(sim_error)?;
+        let steps = py
+            .detach(|| venv.step_into(actions, &mut slots, &write).map(<[_]>::to_vec))
+            .map_err(sim_error)?;
+        self.offset = offset;
         let mut ended = Vec::new();
         for (i, s) in steps.iter().enumerate() {
             (rw[i], te[i], tr[i], dm[i]) = (s.reward, s.terminated, s.truncated, s.info.d_min);
             if s.terminated || s.truncated {
-                ended.push((i, s.info));
+                let d = PyDict::new(py);
+                let p = s.info.pose;
+                d.set_item("pose", (p.x, p.y, p.yaw.to_degrees()))?;
+                d.set_item("step", s.info.step)?;
+                step_info(&d, &s.info)?;
+                ended.push((i, d));
             }
         }
-        write_observations(venv, laser, depth, odom, goal);
-        let mut out = Vec::with_capacity(ended.len());
-        for (i, info) in ended {
-            let final_obs = match self.venv.final_observation(i) {
-                Some(o) => observation_dict(py, &o)?,
-                None => PyDict::new(py),
-            };
-            let d = PyDict::new(py);
-            d.set_item("pose", (info.pose.x, info.pose.y, info.pose.yaw.to_degrees()))?;
-            d.set_item("step", info.step)?;
-            step_info(&d, &info)?;
-            out.push((i, final_obs, d));
-        }
-        Ok(out)
+        Ok((offset, ended))
     }
 
     /// The environments.
@@ -474,6 +538,12 @@ fn shapes() -> ((usize, usize), (usize, usize, usize), usize, usize) {
     ((FRAME_STACK, LASER_BEAMS), (FRAME_STACK, DEPTH_ROWS, DEPTH_COLS), 2 * ODOM_HISTORY, GOAL_DIM)
 }
 
+/// Frames in each environment's laser and depth window buffer of a `VecEnv`.
+#[pyfunction]
+fn window_frames() -> usize {
+    WINDOW_FRAMES
+}
+
 /// The `(v m/s, w rad/s)` command of each action of the paper's Table 1, by index.
 #[pyfunction]
 fn actions() -> Vec<(f32, f32)> {
@@ -498,6 +568,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Env>()?;
     m.add_class::<VecEnv>()?;
     m.add_function(wrap_pyfunction!(shapes, m)?)?;
+    m.add_function(wrap_pyfunction!(window_frames, m)?)?;
     m.add_function(wrap_pyfunction!(actions, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_worlds, m)?)?;
     m.add_function(wrap_pyfunction!(check_task, m)?)?;

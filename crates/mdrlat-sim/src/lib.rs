@@ -29,4 +29,4 @@ pub use episodes::{
 pub use mdrlat_core::{Policy, PolicyError, Sensors};
 pub use policy::{ConstantPolicy, RandomPolicy, ReplayPolicy, Scripted, WanderPolicy};
 pub use scene::StaticScene;
-pub use vec_env::{EnvRef, VecEnv, VecStep};
+pub use vec_env::{EnvRef, SlotWriter, VecEnv, VecStep};

@@ -54,7 +54,37 @@ struct Chunk {
     first: usize,
     /// Finished episodes restart at once (else they wait for [`VecEnv::reset_env`]).
     auto_reset: bool,
+    /// Called after each environment's step during [`VecEnv::step_into`] (and only then).
+    visit: Option<VisitPtr>,
 }
+
+/// What [`VecEnv::step_into`] runs on an environment's own thread after its step: the
+/// environment's index, the step, the episode's final observation if the step ended it, and
+/// the current observation (after any auto-reset).
+type Visit<'a> = dyn Fn(usize, &VecStep, Option<&Observation>, &Observation) + Sync + 'a;
+
+/// A [`Visit`] borrowed for one [`VecEnv::step_into`] call, its lifetime erased so that the
+/// long-lived workers can hold it (see the SAFETY argument there).
+#[derive(Debug, Clone, Copy)]
+struct VisitPtr(*const Visit<'static>);
+
+/// What [`VecEnv::step_into`] calls to fill an environment's slot: the slot, the step, the
+/// episode's final observation if the step ended it, the current observation.
+pub type SlotWriter<'a, T> =
+    dyn Fn(&mut T, &VecStep, Option<&Observation>, &Observation) + Sync + 'a;
+
+/// The slots of one [`VecEnv::step_into`] call, shared with the threads that fill them.
+struct SlotsPtr<T>(*mut T);
+
+// SAFETY: each thread writes only its own environments' slots (see `step_into`), and `T` is
+// `Send`, so handing the slots to other threads is sound.
+#[allow(unsafe_code)]
+unsafe impl<T: Send> Sync for SlotsPtr<T> {}
+
+// SAFETY: the pointee is `Sync` (the `Visit` bound), so calling it from any thread is sound;
+// `step_into` keeps it alive while any thread can reach it.
+#[allow(unsafe_code)]
+unsafe impl Send for VisitPtr {}
 
 impl Chunk {
     /// Runs the pending reset or step on the current thread.
@@ -68,7 +98,7 @@ impl Chunk {
         let auto_reset = self.auto_reset;
         let it =
             self.envs.iter_mut().zip(&mut self.finals).zip(&self.commands).zip(&mut self.results);
-        for (((env, fin), &c), out) in it {
+        for (k, (((env, fin), &c), out)) in it.enumerate() {
             let Some(c) = c else {
                 *out = Ok(None);
                 continue;
@@ -80,9 +110,22 @@ impl Chunk {
                 info: s.info,
             });
             *out = stepped.and_then(|step| {
-                if auto_reset && (step.terminated || step.truncated) {
+                let ended = step.terminated || step.truncated;
+                if auto_reset && ended {
                     env.swap_observation(fin);
                     env.reset(None)?;
+                }
+                if let Some(VisitPtr(visit)) = self.visit {
+                    // SAFETY: `step_into` set the pointer from a reference that outlives this
+                    // call: `step_visiting` clears it only after every chunk has finished.
+                    #[allow(unsafe_code)]
+                    let visit = unsafe { &*visit };
+                    let last = match (ended, auto_reset) {
+                        (false, _) => None,
+                        (true, true) => Some(&*fin),
+                        (true, false) => Some(env.observation()),
+                    };
+                    visit(self.first + k, &step, last, env.observation());
                 }
                 Ok(Some(step))
             });
@@ -140,8 +183,16 @@ fn worker_loop(control: Arc<Control>, chunk: Arc<Mutex<Chunk>>) {
                 std::thread::park_timeout(Duration::from_millis(10));
             }
         }
-        lock(&chunk).run();
+        // A panic is caught so that `done` is always counted: `run_all` waits for every
+        // worker (`step_into` relies on it), and the dead flag fails every later call.
+        let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| lock(&chunk).run()));
+        if ran.is_err() {
+            control.dead.store(true, Ordering::Release);
+        }
         control.done.fetch_add(1, Ordering::AcqRel);
+        if ran.is_err() {
+            return;
+        }
     }
 }
 
@@ -226,6 +277,7 @@ impl VecEnv {
                 reset_seed: None,
                 first: bounds[k],
                 auto_reset: true,
+                visit: None,
             })));
         }
         let control = Arc::new(Control::default());
@@ -294,18 +346,19 @@ impl VecEnv {
             w.handle.thread().unpark();
         }
         lock(&self.chunks[0]).run();
+        // Every worker counts itself done, even after a panic (`worker_loop`), so this waits
+        // for all of them: none is still running this epoch when it returns.
         let mut spins = 0u32;
         while self.control.done.load(Ordering::Acquire) < self.workers.len() {
             spins = spins.wrapping_add(1);
             if spins.is_multiple_of(1024) {
-                if self.workers.iter().any(|w| w.handle.is_finished()) {
-                    self.control.dead.store(true, Ordering::Release);
-                    return Err(SimError::WorkerDied);
-                }
                 std::thread::yield_now();
             } else {
                 std::hint::spin_loop();
             }
+        }
+        if self.control.dead.load(Ordering::Acquire) {
+            return Err(SimError::WorkerDied);
         }
         Ok(())
     }
@@ -336,10 +389,29 @@ impl VecEnv {
     /// # Errors
     /// Wrong number of actions, a step before `reset`, or a reset that found no free pose.
     pub fn step(&mut self, actions: &[Action]) -> Result<&[VecStep], SimError> {
+        self.step_visiting(actions, None)
+    }
+
+    /// [`VecEnv::step`] with `visit` called after each environment's step.
+    fn step_visiting(
+        &mut self,
+        actions: &[Action],
+        visit: Option<VisitPtr>,
+    ) -> Result<&[VecStep], SimError> {
         if actions.len() != self.len() {
             return Err(SimError::ActionCount { expected: self.len(), got: actions.len() });
         }
-        self.run_commands(actions.iter().map(|&a| Some(a.command())))?;
+        for c in &self.chunks {
+            lock(c).visit = visit;
+        }
+        // `run_all` returns only once every thread has finished its chunk (workers count
+        // themselves done even when they panic), and chunks run only inside it: after this
+        // no thread can reach `visit` any more.
+        let ran = self.run_commands(actions.iter().map(|&a| Some(a.command())));
+        for c in &self.chunks {
+            lock(c).visit = None;
+        }
+        ran?;
         self.outcomes.clear();
         for c in &self.chunks {
             for r in &lock(c).results {
@@ -347,6 +419,45 @@ impl VecEnv {
             }
         }
         Ok(&self.outcomes)
+    }
+
+    /// [`VecEnv::step`], and on each environment's own thread right after its step (and any
+    /// auto-reset) `write(&mut outs[i], step, final, current)`: `final` the episode's last
+    /// observation if the step ended it, `current` the observation the next action sees.
+    /// The writes run in parallel, each while the frames it reads are still in its core's
+    /// cache — how the Python bindings fill numpy buffers without a serial copy afterwards.
+    ///
+    /// # Errors
+    /// As [`VecEnv::step`].
+    ///
+    /// # Panics
+    /// If `outs` does not hold one slot per environment.
+    pub fn step_into<T: Send>(
+        &mut self,
+        actions: &[Action],
+        outs: &mut [T],
+        write: &SlotWriter<'_, T>,
+    ) -> Result<&[VecStep], SimError> {
+        assert_eq!(outs.len(), self.len(), "step_into: one slot per environment");
+        let slots = SlotsPtr(outs.as_mut_ptr());
+        let visit = move |i: usize, s: &VecStep, last: Option<&Observation>, now: &Observation| {
+            let slots = &slots;
+            // SAFETY: `i < outs.len()` (asserted above), and each environment is stepped by
+            // exactly one thread, once, per call: no slot is reached twice, so the `&mut`
+            // references are disjoint; `outs` stays mutably borrowed for the whole call.
+            #[allow(unsafe_code)]
+            let slot = unsafe { &mut *slots.0.add(i) };
+            write(slot, s, last, now);
+        };
+        let visit: &Visit<'_> = &visit;
+        // SAFETY: only the lifetime is erased; `step_visiting` clears every copy of the
+        // pointer before it returns, and no thread runs a chunk after that (see there), so
+        // the closure outlives every use.
+        #[allow(unsafe_code)]
+        let ptr = VisitPtr(unsafe {
+            std::mem::transmute::<*const Visit<'_>, *const Visit<'static>>(visit)
+        });
+        self.step_visiting(actions, Some(ptr))
     }
 
     /// Steps the environments whose action is `Some`; the others sit this step out (their

@@ -5,8 +5,8 @@ use mdrlat_core::{Action, FRAME_STACK};
 use mdrlat_geom::Pose2;
 use mdrlat_sim::rollout::{CSV_HEADER, TrajectoryRow};
 use mdrlat_sim::{
-    Collision, Env, EpisodeSpec, Quiet, RandomPolicy, RunOptions, SimConfig, StaticScene, VecEnv,
-    run_episodes,
+    Collision, Env, EpisodeSpec, Observation, Quiet, RandomPolicy, RunOptions, SimConfig,
+    StaticScene, VecEnv, VecStep, run_episodes,
 };
 use mdrlat_world::World;
 use std::sync::Arc;
@@ -228,6 +228,45 @@ fn vec_env_matches_single_envs_and_keeps_final_observations() {
             assert_eq!(&*venv.observation(i), env.observation());
         }
     }
+}
+
+#[test]
+fn step_into_hands_each_thread_its_environments_observations() {
+    // Two vectors with one seed, one stepped plainly and one through `step_into`: every
+    // slot receives its environment's own step, final and current observation (3
+    // environments on 2 threads, so both the caller and a worker fill slots).
+    let config = SimConfig { max_episode_steps: 9, ..SimConfig::default() };
+    let scene = Arc::new(StaticScene::new(Arc::new(room("")), &config));
+    let mut plain = VecEnv::new(scene.clone(), config.clone(), 3, 2).expect("venv");
+    let mut into = VecEnv::new(scene, config, 3, 2).expect("venv");
+    plain.reset(7).expect("reset");
+    into.reset(7).expect("reset");
+    type Slot = Option<(VecStep, Option<Observation>, Observation, String)>;
+    let write = |slot: &mut Slot, s: &VecStep, last: Option<&Observation>, now: &Observation| {
+        let thread = std::thread::current().name().unwrap_or("caller").to_string();
+        *slot = Some((*s, last.cloned(), now.clone(), thread));
+    };
+    let mut threads = std::collections::BTreeSet::new();
+    let mut ends = 0;
+    for t in 0..30 {
+        let actions: Vec<Action> = (0..3).map(|i| act((t * 7 + i) % 10)).collect();
+        let expect = plain.step(&actions).expect("step").to_vec();
+        let mut slots: Vec<Slot> = vec![None; 3];
+        let got = into.step_into(&actions, &mut slots, &write).expect("step_into").to_vec();
+        assert_eq!(got, expect);
+        for (i, slot) in slots.into_iter().enumerate() {
+            let (s, last, now, thread) = slot.expect("every slot written");
+            assert_eq!(s, expect[i]);
+            assert_eq!(now, *plain.observation(i));
+            assert_eq!(now, *into.observation(i));
+            let fin = plain.final_observation(i).map(|o| o.clone());
+            ends += usize::from(fin.is_some());
+            assert_eq!(last, fin, "env {i}, step {t}: final observation");
+            threads.insert(thread);
+        }
+    }
+    assert!(ends > 0, "no episode ended: the final-observation path was not tested");
+    assert_eq!(threads.len(), 2, "slots filled on {threads:?}");
 }
 
 #[test]
