@@ -345,7 +345,11 @@ impl VecEnv {
         for w in &self.workers {
             w.handle.thread().unpark();
         }
-        lock(&self.chunks[0]).run();
+        // A panic here is held until the workers are done: they may be using what
+        // `step_into` lent them, which unwinding would free.
+        let here = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            lock(&self.chunks[0]).run();
+        }));
         // Every worker counts itself done, even after a panic (`worker_loop`), so this waits
         // for all of them: none is still running this epoch when it returns.
         let mut spins = 0u32;
@@ -356,6 +360,9 @@ impl VecEnv {
             } else {
                 std::hint::spin_loop();
             }
+        }
+        if let Err(panic) = here {
+            std::panic::resume_unwind(panic);
         }
         if self.control.dead.load(Ordering::Acquire) {
             return Err(SimError::WorkerDied);
@@ -407,11 +414,14 @@ impl VecEnv {
         // `run_all` returns only once every thread has finished its chunk (workers count
         // themselves done even when they panic), and chunks run only inside it: after this
         // no thread can reach `visit` any more.
-        let ran = self.run_commands(actions.iter().map(|&a| Some(a.command())));
+        let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            self.run_commands(actions.iter().map(|&a| Some(a.command())))
+        }));
+        // Cleared on every path, a panic included: a later call must not find it.
         for c in &self.chunks {
             lock(c).visit = None;
         }
-        ran?;
+        ran.unwrap_or_else(|panic| std::panic::resume_unwind(panic))?;
         self.outcomes.clear();
         for c in &self.chunks {
             for r in &lock(c).results {
