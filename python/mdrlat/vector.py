@@ -8,10 +8,11 @@ on, instead of copying all four (a whole stack only after a reset, and every 28 
 the view starts again at the front); each environment's thread writes its own rows right
 after its step. The final observations of ended episodes are views of buffers too (row
 ``i`` for environment ``i``, rewritten when its next episode ends). So the arrays ``step``
-returns are views into memory that later steps overwrite: copy what you keep. Finished episodes restart in the same step
-(``AutoresetMode.SAME_STEP``): their final observation and info are in
-``infos["final_obs"]`` / ``infos["final_info"]``, masked by ``infos["_final_obs"]``, as
-Gymnasium's own vector environments write them. Seeding follows Gymnasium: ``reset(seed=s)``
+returns are views into memory that later steps overwrite: copy what you keep.
+
+Finished episodes restart in the same step (``AutoresetMode.SAME_STEP``): their final
+observation and info are in ``infos["final_obs"]`` / ``infos["final_info"]``, masked by
+``infos["_final_obs"]``, as Gymnasium's own vector environments write them. Seeding follows Gymnasium: ``reset(seed=s)``
 starts environment ``i`` as ``MdrlatEnv.reset(seed=s + i)`` would.
 """
 

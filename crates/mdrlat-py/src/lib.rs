@@ -54,30 +54,27 @@ pub struct Env {
     config_json: String,
 }
 
-/// An observation as a dict of numpy arrays (fresh ones).
+/// An observation as a dict of numpy arrays (fresh ones), written by [`ObsSlot::write`] as
+/// the vector env writes its buffers.
 fn observation_dict<'py>(py: Python<'py>, obs: &Observation) -> PyResult<Bound<'py, PyDict>> {
-    {
-        let stack = |s: &mdrlat_core::FrameStack| {
-            let mut out = vec![0.0f32; FRAME_STACK * s.frame_len()];
-            s.write_stacked(&mut out, |from, to| to.copy_from_slice(from));
-            out
-        };
-        let d = PyDict::new(py);
-        let laser = Array2::from_shape_vec((FRAME_STACK, LASER_BEAMS), stack(&obs.laser))
-            .map_err(|e| PyRuntimeError::new_err(format!("laser stack: {e}")))?;
-        let depth =
-            Array3::from_shape_vec((FRAME_STACK, DEPTH_ROWS, DEPTH_COLS), stack(&obs.depth))
-                .map_err(|e| PyRuntimeError::new_err(format!("depth stack: {e}")))?;
-        let odom: Vec<f32> = obs.odom.iter().flat_map(|v| [v.v, v.w]).collect();
-        debug_assert_eq!(odom.len(), 2 * ODOM_HISTORY);
-        d.set_item("laser", laser.into_pyarray(py))?;
-        d.set_item("depth", depth.into_pyarray(py))?;
-        d.set_item("odom", Array1::from_vec(odom).into_pyarray(py))?;
-        if let Some(goal) = obs.goal {
-            d.set_item("goal", Array1::from_vec(goal.to_vec()).into_pyarray(py))?;
-        }
-        Ok(d)
+    let goal_len = if obs.goal.is_some() { GOAL_DIM } else { 0 };
+    let (mut laser, mut depth) =
+        (vec![0.0f32; FRAME_STACK * LASER_BEAMS], vec![0.0f32; FRAME_STACK * DEPTH_LEN]);
+    let (mut odom, mut goal) = (vec![0.0f32; 2 * ODOM_HISTORY], vec![0.0f32; goal_len]);
+    ObsSlot { laser: &mut laser, depth: &mut depth, odom: &mut odom, goal: &mut goal }
+        .write(obs, 0, true);
+    let d = PyDict::new(py);
+    let laser = Array2::from_shape_vec((FRAME_STACK, LASER_BEAMS), laser)
+        .map_err(|e| PyRuntimeError::new_err(format!("laser stack: {e}")))?;
+    let depth = Array3::from_shape_vec((FRAME_STACK, DEPTH_ROWS, DEPTH_COLS), depth)
+        .map_err(|e| PyRuntimeError::new_err(format!("depth stack: {e}")))?;
+    d.set_item("laser", laser.into_pyarray(py))?;
+    d.set_item("depth", depth.into_pyarray(py))?;
+    d.set_item("odom", Array1::from_vec(odom).into_pyarray(py))?;
+    if obs.goal.is_some() {
+        d.set_item("goal", Array1::from_vec(goal).into_pyarray(py))?;
     }
+    Ok(d)
 }
 
 /// A step's `info` dict entries: velocity, `d_min`, collision kind, goal reached.
