@@ -189,12 +189,14 @@ pub(crate) fn gemm_short_by_long(
                     j1 - j0,
                     k,
                     a.as_ptr().add(i0 * k),
-                    k,
+                    (k, 1),
                     b.as_ptr().add(j0),
                     n,
                     out.get().add(i0 * n + j0),
                     n,
                     accumulate,
+                    avx512::KC,
+                    false,
                 );
             }
         };
@@ -212,6 +214,71 @@ pub(crate) fn gemm_short_by_long(
         return;
     }
     gemm(m, n, k, Mat::n(a), Mat::n(b), c, accumulate);
+}
+
+/// `a · b` as a new `m × n` row-major matrix, for a tall `a` and a `b` of a batch's size:
+/// the weight and input gradients of a linear layer (`xᵀ · dy`, `W · dyᵀ`). On CPUs with
+/// AVX-512 the short-by-long kernel, reading `a` in place (row-major or transposed, the
+/// latter from L2: its rows alias in L1) and `b` in one block of depth when it is small,
+/// so that each register tile streams its rows of `a` once, in order, and fetching each
+/// next tile's rows of `c` for writing while a tile is summed (the output is fresh memory:
+/// without that, the stores wait on memory); elsewhere the `gemm` crate. Each element is
+/// summed by one thread in one order. One AMD EPYC Zen 4 core, side by side with the
+/// `gemm` crate: `xᵀ · dy` for 32 × 4096 × 512 55–76 → 76–82 GFLOP/s, `W · dyᵀ` with the
+/// weight out of cache 71–72 → 76–82.
+///
+/// # Panics
+/// If a slice is shorter than its matrix.
+#[allow(unsafe_code)]
+pub(crate) fn gemm_tall(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) -> Vec<f32> {
+    assert!(a.data.len() >= m * k, "gemm: lhs has {} values, needs {m}x{k}", a.data.len());
+    assert!(b.data.len() >= k * n, "gemm: rhs has {} values, needs {k}x{n}", b.data.len());
+    #[cfg(target_arch = "x86_64")]
+    if m >= 16 && n > 0 && k > 0 && avx512::available() {
+        let rhs: std::borrow::Cow<'_, [f32]> = if b.transposed {
+            (0..k * n).map(|i| b.data[(i % n) * k + i / n]).collect()
+        } else {
+            b.data[..k * n].into()
+        };
+        let (rows, depth) = if a.transposed { (1, m) } else { (k, 1) };
+        // One block of depth while the whole of `b` fits in L2 with room to spare.
+        let kc = if k * n <= 1 << 14 { k } else { avx512::KC };
+        let mut c: Vec<f32> = Vec::with_capacity(m * n);
+        let out = avx512::SendPtr(c.as_mut_ptr());
+        let run = |i0: usize, i1: usize| {
+            // SAFETY: rows i0..i1 of `a` (m × k through its strides, asserted above), `b`
+            // (k × n, `rhs`) and rows i0..i1 of `c` (capacity m × n) are in bounds; the two
+            // halves below write disjoint rows of `c`.
+            unsafe {
+                avx512::short_by_long(
+                    i1 - i0,
+                    n,
+                    k,
+                    a.data.as_ptr().add(i0 * rows),
+                    (rows, depth),
+                    rhs.as_ptr(),
+                    n,
+                    out.get().add(i0 * n),
+                    n,
+                    false,
+                    kc,
+                    true,
+                );
+            }
+        };
+        if m * n * k >= PARALLEL_MACS && rayon::current_num_threads() > 1 {
+            let half = m.div_ceil(2 * 16) * 16;
+            rayon::join(|| run(0, half), || run(half, m));
+        } else {
+            run(0, m);
+        }
+        // SAFETY: the kernel's first block of depth stores every element of rows 0..m and
+        // columns 0..n (each row tile, each strip, under masks that cover the tail), and
+        // `accumulate` is off, so it never reads the uninitialised memory.
+        unsafe { c.set_len(m * n) };
+        return c;
+    }
+    gemm_new(m, n, k, a, b)
 }
 
 /// A float rounded to bfloat16 (round to nearest, ties to even): its upper 16 bits.
@@ -315,7 +382,7 @@ mod avx512 {
     const ROWS: usize = 8;
     /// Weight rows per block (128 rows × 48 floats: 24 KB of a strip, kept in L1/L2 while
     /// every row tile of `a` passes over it).
-    const KC: usize = 128;
+    pub(super) const KC: usize = 128;
 
     /// A pointer the two halves of a product may share (they write disjoint columns).
     #[derive(Clone, Copy)]
@@ -411,26 +478,34 @@ mod avx512 {
         n: usize,
         k: usize,
         a: *const f32,
-        lda: usize,
+        (lda, step): (usize, usize),
         b: *const f32,
         ldb: usize,
         c: *mut f32,
         ldc: usize,
         accumulate: bool,
+        kc: usize,
+        c_ahead: bool,
     ) {
-        // Up to 16 columns (the first depth convolution's 16 filters): one vector per row,
-        // 16 rows a tile; else 8 rows × 48 columns.
-        let wide = n > 16;
-        let (tile_rows, strip) = if wide { (ROWS, STRIP) } else { (16, 16) };
+        // Register tiles by the width of `c`: up to 16 columns (the first depth
+        // convolution's 16 filters) one vector × 16 rows; up to 32 (a batch, in the
+        // transposed input-gradient products) two vectors × 12 rows; else three × 8.
+        let vectors = n.div_ceil(16).min(3);
+        let (tile_rows, strip) = match vectors {
+            1 => (16, 16),
+            2 => (12, 32),
+            _ => (ROWS, STRIP),
+        };
+        let wide = vectors > 1;
         let mut pc = 0;
         while pc < k {
-            let kk = KC.min(k - pc);
+            let kk = kc.min(k - pc);
             let add = accumulate || pc > 0;
             let mut ahead = if wide {
-                let tiles = n.div_ceil(STRIP) * m.div_ceil(ROWS);
+                let tiles = n.div_ceil(strip) * m.div_ceil(tile_rows);
                 BlockPrefetch::new(
                     b.wrapping_add((pc + kk) * ldb),
-                    KC.min(k - pc - kk),
+                    kc.min(k - pc - kk),
                     n,
                     ldb,
                     tiles * kk,
@@ -452,14 +527,15 @@ mod avx512 {
                 let more = wide && (jc + strip < n || pc + kk < k);
                 let mut ic = 0;
                 while ic < m {
-                    let rows = [16, 8, 4, 2, 1]
+                    let rows = [16, 12, 8, 4, 2, 1]
                         .into_iter()
-                        .find(|&r| r <= tile_rows && r <= m - ic)
+                        .find(|&r| r <= tile_rows && r <= m - ic && (r != 12 || vectors == 2))
                         .unwrap_or(1);
                     let t = Tile {
                         k: kk,
-                        a: unsafe { a.add(ic * lda + pc) },
+                        a: unsafe { a.add(ic * lda + pc * step) },
                         lda,
+                        step,
                         b: unsafe { b.add(pc * ldb + jc) },
                         ldb,
                         c: unsafe { c.add(ic * ldc + jc) },
@@ -468,18 +544,25 @@ mod avx512 {
                         add,
                         prefetch: (more && ic == 0).then_some(next),
                         ahead,
+                        c_next: (c_ahead && ic + rows < m)
+                            .then(|| c.wrapping_add((ic + rows) * ldc + jc).cast_const()),
                     };
                     unsafe {
-                        match (wide, rows) {
-                            (true, 8) => tile::<8>(&t),
-                            (true, 4) => tile::<4>(&t),
-                            (true, 2) => tile::<2>(&t),
-                            (true, _) => tile::<1>(&t),
-                            (false, 16) => column::<16>(&t),
-                            (false, 8) => column::<8>(&t),
-                            (false, 4) => column::<4>(&t),
-                            (false, 2) => column::<2>(&t),
-                            (false, _) => column::<1>(&t),
+                        match (vectors, rows) {
+                            (3, 8) => tile::<8, 3>(&t),
+                            (3, 4) => tile::<4, 3>(&t),
+                            (3, 2) => tile::<2, 3>(&t),
+                            (3, _) => tile::<1, 3>(&t),
+                            (2, 12) => tile::<12, 2>(&t),
+                            (2, 8) => tile::<8, 2>(&t),
+                            (2, 4) => tile::<4, 2>(&t),
+                            (2, 2) => tile::<2, 2>(&t),
+                            (2, _) => tile::<1, 2>(&t),
+                            (_, 16) => column::<16>(&t),
+                            (_, 8) => column::<8>(&t),
+                            (_, 4) => column::<4>(&t),
+                            (_, 2) => column::<2>(&t),
+                            (_, _) => column::<1>(&t),
                         }
                     }
                     ic += rows;
@@ -498,7 +581,7 @@ mod avx512 {
         for p in 0..t.k {
             let bv = unsafe { _mm512_maskz_loadu_ps(t.masks[0], t.b.add(p * t.ldb)) };
             for (r, acc) in acc.iter_mut().enumerate() {
-                let x = _mm512_set1_ps(unsafe { *t.a.add(r * t.lda + p) });
+                let x = _mm512_set1_ps(unsafe { *t.a.add(r * t.lda + p * t.step) });
                 *acc = _mm512_fmadd_ps(x, bv, *acc);
             }
         }
@@ -620,7 +703,9 @@ mod avx512 {
     struct Tile {
         k: usize,
         a: *const f32,
+        /// Strides of `a` from row to row and from depth to depth.
         lda: usize,
+        step: usize,
         b: *const f32,
         ldb: usize,
         c: *mut f32,
@@ -629,36 +714,41 @@ mod avx512 {
         add: bool,
         prefetch: Option<*const f32>,
         ahead: BlockPrefetch,
+        /// The next tile's block of `c`, to fetch for writing while this one is summed.
+        c_next: Option<*const f32>,
     }
 
-    /// `R` rows × 48 columns: `k` rank-1 updates in registers, then added to (or stored
-    /// into) `c` under the column masks.
+    /// `R` rows × `V` vectors of columns: `k` rank-1 updates in registers, then added to
+    /// (or stored into) `c` under the column masks.
     #[target_feature(enable = "avx512f")]
-    unsafe fn tile<const R: usize>(t: &Tile) {
-        let mut acc = [[_mm512_setzero_ps(); 3]; R];
+    unsafe fn tile<const R: usize, const V: usize>(t: &Tile) {
+        let mut acc = [[_mm512_setzero_ps(); V]; R];
         for p in 0..t.k {
             let bp = unsafe { t.b.add(p * t.ldb) };
             t.ahead.step(p);
+            if let Some(cn) = t.c_next
+                && p < R * V
+            {
+                let at = cn.wrapping_add((p / V) * t.ldc + 16 * (p % V));
+                _mm_prefetch::<_MM_HINT_ET0>(at.cast::<i8>());
+            }
             if let Some(next) = t.prefetch {
                 let q = next.wrapping_add(p * t.ldb);
-                _mm_prefetch::<_MM_HINT_T0>(q.cast::<i8>());
-                _mm_prefetch::<_MM_HINT_T0>(q.wrapping_add(16).cast::<i8>());
-                _mm_prefetch::<_MM_HINT_T0>(q.wrapping_add(32).cast::<i8>());
+                for v in 0..V {
+                    _mm_prefetch::<_MM_HINT_T0>(q.wrapping_add(16 * v).cast::<i8>());
+                }
             }
             // A masked-off vector reads nothing; its address may lie past the row's end
-            // (a tail strip of under 48 columns), so it is computed with `wrapping_add`.
-            let (b0, b1, b2) = unsafe {
-                (
-                    _mm512_maskz_loadu_ps(t.masks[0], bp),
-                    _mm512_maskz_loadu_ps(t.masks[1], bp.wrapping_add(16)),
-                    _mm512_maskz_loadu_ps(t.masks[2], bp.wrapping_add(32)),
-                )
-            };
+            // (a tail strip), so it is computed with `wrapping_add`.
+            let mut bv = [_mm512_setzero_ps(); V];
+            for (v, b) in bv.iter_mut().enumerate() {
+                *b = unsafe { _mm512_maskz_loadu_ps(t.masks[v], bp.wrapping_add(16 * v)) };
+            }
             for (r, acc) in acc.iter_mut().enumerate() {
-                let x = _mm512_set1_ps(unsafe { *t.a.add(r * t.lda + p) });
-                acc[0] = _mm512_fmadd_ps(x, b0, acc[0]);
-                acc[1] = _mm512_fmadd_ps(x, b1, acc[1]);
-                acc[2] = _mm512_fmadd_ps(x, b2, acc[2]);
+                let x = _mm512_set1_ps(unsafe { *t.a.add(r * t.lda + p * t.step) });
+                for (acc, &b) in acc.iter_mut().zip(&bv) {
+                    *acc = _mm512_fmadd_ps(x, b, *acc);
+                }
             }
         }
         for (r, acc) in acc.iter().enumerate() {
@@ -770,6 +860,45 @@ mod tests {
             let mut single = vec![0.0f32; m * n];
             one.install(|| gemm_short_by_long(m, n, k, &a, &b, &mut single, false));
             assert_eq!(split, single);
+        }
+    }
+
+    /// The tall product against the definition: the weight-gradient shape (`a`
+    /// transposed), the input-gradient shape (`b` transposed, one or two vectors wide),
+    /// depths over a block, row tails; the same bytes on one thread and on two.
+    #[test]
+    fn tall_products_match_the_definition() {
+        for (m, n, k, ta, tb) in [
+            (600, 70, 32, true, false),
+            (4096, 512, 32, true, false),
+            (300, 32, 200, false, true),
+            (1030, 32, 512, false, true),
+            (41, 17, 5, false, false),
+            (100, 5, 512, true, true),
+            (64, 48, 700, false, false),
+            (17, 1, 3, true, false),
+        ] {
+            let a: Vec<f32> = (0..m * k).map(|v| ((v * 7) % 13) as f32 * 0.25 - 1.5).collect();
+            let b: Vec<f32> = (0..k * n).map(|v| ((v * 5) % 11) as f32 * 0.125 - 0.6).collect();
+            let at = |i: usize, p: usize| if ta { a[p * m + i] } else { a[i * k + p] };
+            let bt = |p: usize, j: usize| if tb { b[j * k + p] } else { b[p * n + j] };
+            let mut want = vec![0.0f32; m * n];
+            for i in 0..m {
+                for j in 0..n {
+                    want[i * n + j] =
+                        (0..k).map(|p| at(i, p) as f64 * bt(p, j) as f64).sum::<f64>() as f32;
+                }
+            }
+            let mat = |d, t| if t { Mat::t(d) } else { Mat::n(d) };
+            let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+            let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("pool");
+            let single = one.install(|| gemm_tall(m, n, k, mat(&a, ta), mat(&b, tb)));
+            let split = two.install(|| gemm_tall(m, n, k, mat(&a, ta), mat(&b, tb)));
+            assert!(
+                single.iter().zip(&want).all(|(x, y)| (x - y).abs() <= 1e-4 * y.abs().max(1.0)),
+                "{m}x{n}x{k}"
+            );
+            assert_eq!(single, split, "{m}x{n}x{k} on two threads");
         }
     }
 
