@@ -24,7 +24,7 @@ use conv::{
     ConvGeometry, column_sums, patch_product_backward, patch_product_relu, relu_backward,
     relu_in_place,
 };
-use gemm::{Conv16, Mat, conv16, gemm_new, gemm_short_by_long, gemm_tall};
+use gemm::{Conv16, Mat, conv16, conv16_weight_grad, gemm_new, gemm_short_by_long, gemm_tall};
 use rayon::prelude::*;
 
 /// Width of the heads' hidden layers, and the bilinear fusion's `L_d`, `L_l`.
@@ -536,34 +536,13 @@ impl HostNet {
         let mut out = bias.repeat(images.len() * positions);
         // Straight from each zero-padded image where the CPU has AVX-512 and there are 16
         // filters; else from its patches.
-        let [pt, pl] = g.pad_before();
-        let [oh, ow] = g.out();
-        let [kh, kw] = g.kernel;
-        let direct = Conv16 {
-            channels: g.channels,
-            rows: (oh - 1) * g.stride + kh,
-            cols: (ow - 1) * g.stride + kw,
-            kh,
-            kw,
-            stride: g.stride,
-            out_rows: oh,
-            out_cols: ow,
-        };
-        let (h, w) = (g.rows, g.cols);
+        let direct = Self::conv1_direct(&g);
         out.par_chunks_mut(positions * filters).zip(images.par_iter()).for_each_init(
             || (Vec::new(), Vec::new()),
             |(padded, patches), (out, image)| {
-                let done = filters == 16 && pt + h <= direct.rows && pl + w <= direct.cols && {
-                    padded.clear();
-                    padded.resize(direct.channels * direct.rows * direct.cols, 0.0);
-                    for (ch, plane) in image.chunks_exact(h * w).enumerate() {
-                        for (iy, src) in plane.chunks_exact(w).enumerate() {
-                            let at = (ch * direct.rows + pt + iy) * direct.cols + pl;
-                            padded[at..at + w].copy_from_slice(src);
-                        }
-                    }
-                    conv16(&direct, padded, &wt, out)
-                };
+                let done = filters == 16
+                    && Self::pad_conv1_image(&g, &direct, image, padded)
+                    && conv16(&direct, padded, &wt, out);
                 if !done {
                     g.extract(image, 1, patches);
                     gemm_short_by_long(positions, filters, k, patches, &wt, out, true);
@@ -574,9 +553,54 @@ impl HostNet {
         out
     }
 
-    /// The first depth layer's weight gradient `Σ_images dyᵀ · P` (its patches cut again,
-    /// one image at a time into a buffer that stays in cache), summed in image order, and its
-    /// bias gradient.
+    /// The first depth layer as a [`Conv16`] over its image zero-padded on every side.
+    fn conv1_direct(g: &PatchGeometry) -> Conv16 {
+        let [oh, ow] = g.out();
+        let [kh, kw] = g.kernel;
+        Conv16 {
+            channels: g.channels,
+            rows: (oh - 1) * g.stride + kh,
+            cols: (ow - 1) * g.stride + kw,
+            kh,
+            kw,
+            stride: g.stride,
+            out_rows: oh,
+            out_cols: ow,
+        }
+    }
+
+    /// `image` zero-padded into `padded` as `direct` reads it; `false` where the padding
+    /// does not take that form (the caller cuts patches instead).
+    fn pad_conv1_image(
+        g: &PatchGeometry,
+        direct: &Conv16,
+        image: &[f32],
+        padded: &mut Vec<f32>,
+    ) -> bool {
+        let [pt, pl] = g.pad_before();
+        let (h, w) = (g.rows, g.cols);
+        if pt + h > direct.rows || pl + w > direct.cols {
+            return false;
+        }
+        // The border stays zero from the buffer's first use: only the interior is written.
+        let len = direct.channels * direct.rows * direct.cols;
+        if padded.len() != len {
+            padded.clear();
+            padded.resize(len, 0.0);
+        }
+        for (ch, plane) in image.chunks_exact(h * w).enumerate() {
+            for (iy, src) in plane.chunks_exact(w).enumerate() {
+                let at = (ch * direct.rows + pt + iy) * direct.cols + pl;
+                padded[at..at + w].copy_from_slice(src);
+            }
+        }
+        true
+    }
+
+    /// The first depth layer's weight gradient `Σ_images dyᵀ · P`, summed in image order,
+    /// and its bias gradient: with AVX-512 and 16 filters straight from each zero-padded
+    /// image ([`conv16_weight_grad`]), else from its patches cut again, one image at a time
+    /// into a buffer that stays in cache.
     fn depth_conv1_backward(
         &self,
         c1: &HostConv,
@@ -585,20 +609,37 @@ impl HostNet {
     ) -> (Vec<f32>, Vec<f32>) {
         let g = Self::conv1_geometry(c1);
         let (positions, filters, k) = (g.positions(), c1.geometry.out_channels, g.patch_len());
-        let partial: Vec<Vec<f32>> = images
+        let direct = Self::conv1_direct(&g);
+        // Each image's share, `[560 × 16]` (transposed) when computed directly, else
+        // `[16 × 560]`.
+        let partial: Vec<(Vec<f32>, bool)> = images
             .par_iter()
             .zip(dy.par_chunks(positions * filters))
-            .map_init(Vec::new, |patches, (image, dy)| {
-                g.extract(image, 1, patches);
-                // dW [16 × 560] = dyᵀ [16 × 320] · P [320 × 560].
-                gemm_new(filters, k, positions, Mat::t(dy), Mat::n(patches))
-            })
+            .map_init(
+                || (Vec::new(), Vec::new()),
+                |(padded, patches), (image, dy)| {
+                    let mut dwt = vec![0.0; filters * k];
+                    if filters == 16
+                        && Self::pad_conv1_image(&g, &direct, image, padded)
+                        && conv16_weight_grad(&direct, padded, dy, &mut dwt)
+                    {
+                        return (dwt, true);
+                    }
+                    g.extract(image, 1, patches);
+                    // dW [16 × 560] = dyᵀ [16 × 320] · P [320 × 560].
+                    (gemm_new(filters, k, positions, Mat::t(dy), Mat::n(patches)), false)
+                },
+            )
             .collect();
         let mut dw = vec![0.0; filters * k];
-        for p in &partial {
+        for (p, _) in &partial {
             for (d, v) in dw.iter_mut().zip(p) {
                 *d += v;
             }
+        }
+        if partial.first().is_some_and(|&(_, transposed)| transposed) {
+            let dwt = std::mem::take(&mut dw);
+            dw = (0..filters * k).map(|i| dwt[(i % k) * filters + i / k]).collect();
         }
         (dw, column_sums(dy, filters))
     }
