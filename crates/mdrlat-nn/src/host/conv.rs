@@ -3,7 +3,7 @@
 //! `[out, in, kh, kw]` permuted to `[out, kh, kw, in]` to match. A 1D convolution is the
 //! `H = 1` case.
 
-use super::gemm::{Mat, gemm, gemm_new};
+use super::gemm::{Mat, gemm_tall};
 use rayon::prelude::*;
 
 /// Geometry of one convolution layer.
@@ -160,9 +160,12 @@ impl ConvGeometry {
 pub(crate) fn patch_product_relu(cols: &[f32], w: &[f32], bias: &[f32], rows: usize) -> Vec<f32> {
     let out = bias.len();
     let k = w.len() / out.max(1);
-    let mut y = bias.repeat(rows);
-    gemm(rows, out, k, Mat::n(cols), Mat::t(w), &mut y, true);
-    relu_in_place(&mut y);
+    let mut y = gemm_tall(rows, out, k, Mat::n(cols), Mat::t(w));
+    for row in y.chunks_exact_mut(out.max(1)) {
+        for (y, b) in row.iter_mut().zip(bias) {
+            *y = (*y + b).max(0.0);
+        }
+    }
     y
 }
 
@@ -179,10 +182,10 @@ pub(crate) fn patch_product_backward(
     let out = dy.len() / rows.max(1);
     let k = w.len() / out.max(1);
     let (dw, ()) = rayon::join(
-        || gemm_new(out, k, rows, Mat::t(dy), Mat::n(cols)),
+        || gemm_tall(out, k, rows, Mat::t(dy), Mat::n(cols)),
         || {
             if let Some(dcols) = dcols {
-                *dcols = gemm_new(rows, k, out, Mat::n(dy), Mat::n(w));
+                *dcols = gemm_tall(rows, k, out, Mat::n(dy), Mat::n(w));
             }
         },
     );
