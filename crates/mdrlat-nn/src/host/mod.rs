@@ -138,9 +138,12 @@ impl HostLinear {
                     // are streamed once, in order (and the `gemm` crate, where it is used,
                     // runs ~2x faster with the long dimension first).
                     let dxt = gemm_tall(din, batch, dout, Mat::n(weight), Mat::t(dy));
-                    for (r, row) in dx.chunks_exact_mut(din).take(batch).enumerate() {
-                        for (j, d) in row.iter_mut().enumerate() {
-                            let v = dxt[j * batch + r];
+                    // Back to `[batch, din]`, reading `dxt` in order: its row `j` goes to
+                    // column `j` of every row of `dx` (one cache line of each row of `dx`
+                    // serves 16 of them).
+                    for (j, src) in dxt.chunks_exact(batch).enumerate() {
+                        for (r, &v) in src.iter().enumerate() {
+                            let d = &mut dx[r * din + j];
                             *d = if accumulate { *d + v } else { v };
                         }
                     }
