@@ -3,7 +3,7 @@
 //! `[out, in, kh, kw]` permuted to `[out, kh, kw, in]` to match. A 1D convolution is the
 //! `H = 1` case.
 
-use super::gemm::{Mat, gemm_tall};
+use super::gemm::{Mat, gemm, gemm_tall};
 use rayon::prelude::*;
 
 /// Geometry of one convolution layer.
@@ -160,6 +160,14 @@ impl ConvGeometry {
 pub(crate) fn patch_product_relu(cols: &[f32], w: &[f32], bias: &[f32], rows: usize) -> Vec<f32> {
     let out = bias.len();
     let k = w.len() / out.max(1);
+    // A single observation's few patches: the `gemm` crate (faster there: 0.30–0.36 against
+    // 0.37–0.38 ms for a depth-only decision on one Zen 4 core); a batch's: `gemm_tall`.
+    if rows < 1024 {
+        let mut y = bias.repeat(rows);
+        gemm(rows, out, k, Mat::n(cols), Mat::t(w), &mut y, true);
+        relu_in_place(&mut y);
+        return y;
+    }
     let mut y = gemm_tall(rows, out, k, Mat::n(cols), Mat::t(w));
     for row in y.chunks_exact_mut(out.max(1)) {
         for (y, b) in row.iter_mut().zip(bias) {

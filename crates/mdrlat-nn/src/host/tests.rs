@@ -182,4 +182,3 @@ fn bf16_weights_give_nearly_the_f32_q_values() {
         assert!(err > 0.0 && err < 2e-2, "{variant}: relative error {err}");
     }
 }
-
