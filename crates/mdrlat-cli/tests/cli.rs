@@ -162,6 +162,40 @@ fn bench_prints_json_lines() {
     }
 }
 
+/// `bench train --json`: the reference first, then per variant the step's rate divided by
+/// the reference it was measured against — never below the first one (the reference is
+/// the highest of its measurements in the run); bad arguments are clear errors.
+#[test]
+fn bench_train_relates_each_step_to_the_same_run_reference() {
+    let args = ["bench", "train", "--json", "--seconds", "0.05", "--variants"];
+    let o = mdrlat(&[&args[..], &["laser-only,multi"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8(o.stdout).expect("utf8");
+    let lines: Vec<serde_json::Value> =
+        out.lines().map(|l| serde_json::from_str(l).expect("json line")).collect();
+    assert_eq!(lines[0]["bench"], "gemm_reference");
+    let first = lines[0]["gflops"].as_f64().expect("reference rate");
+    assert!(first > 0.0);
+    let steps: Vec<&serde_json::Value> = lines.iter().filter(|l| l["bench"] == "train").collect();
+    let names: Vec<&str> = steps.iter().filter_map(|l| l["variant"].as_str()).collect();
+    assert_eq!(names, ["laser-only", "multi"]);
+    let mut last = first;
+    for l in steps {
+        let (gflops, reference, efficiency) = (
+            l["gflops"].as_f64().expect("rate"),
+            l["reference_gflops"].as_f64().expect("reference"),
+            l["efficiency"].as_f64().expect("efficiency"),
+        );
+        assert!(reference >= last - 0.05, "the reference only rises: {reference} after {last}");
+        assert!((efficiency - gflops / reference).abs() < 2e-3, "{l}");
+        let ms = l["ms_per_step"].as_f64().expect("ms");
+        let gflop = l["gflop_per_step"].as_f64().expect("gflop");
+        assert!((gflop / (ms * 1e-3) / gflops - 1.0).abs() < 0.05, "{l}");
+        last = reference;
+    }
+    let bad = mdrlat(&["bench", "train", "--seconds=-1"]);
+    assert_clean_failure(&bad, &["--seconds -1", "between 0 and 3600"]);
+}
 #[test]
 fn config_default_round_trips_and_bad_configs_are_rejected() {
     let d = tmp("config");
