@@ -83,7 +83,7 @@ struct HostLinear {
     bias: HostTensor,
     /// The weight rounded to bfloat16, when inference was asked to read it so
     /// ([`HostNet::with_bf16_weights`]).
-    bf16: Option<Vec<u16>>,
+    bf16: Option<gemm::Bf16Matrix>,
 }
 
 impl HostLinear {
@@ -96,7 +96,8 @@ impl HostLinear {
     }
 
     fn round_to_bf16(&mut self) {
-        self.bf16 = Some(self.weight.data().iter().map(|&w| gemm::to_bf16(w)).collect());
+        let (din, dout) = self.dims();
+        self.bf16 = Some(gemm::Bf16Matrix::new(din, dout, self.weight.data()));
     }
 
     fn dims(&self) -> (usize, usize) {
@@ -109,7 +110,7 @@ impl HostLinear {
         let mut y = self.bias.data().repeat(batch);
         if let Some(w) = &self.bf16 {
             let mut rows = x.chunks_exact(din).zip(y.chunks_exact_mut(dout));
-            if rows.all(|(x, y)| gemm::vec_by_bf16(din, dout, x, w, y)) {
+            if rows.all(|(x, y)| w.vec_mul(x, y)) {
                 return y;
             }
             unreachable!("bfloat16 weights exist only where their kernel does");
