@@ -318,11 +318,22 @@ pub fn profile(
         "step phase 1: targets + online forward (side by side on flex)".into(),
         median(&mut p0),
     ));
-    out.push(("step phase 2: losses and backward".into(), median(&mut p1)));
-    out.push((
-        format!("step phase 3: Adam ({share:.0}% of parameter updates fused) + plain copy"),
-        median(&mut p2),
-    ));
+    let (two, three) = if learner.uses_host_kernels() {
+        (
+            "step phase 2: losses and the heads' backward".to_string(),
+            format!(
+                "step phase 3: rest of the backward beside the heads' Adam, then its Adam \
+                 ({share:.0}% of parameter updates fused)"
+            ),
+        )
+    } else {
+        (
+            "step phase 2: losses and backward".to_string(),
+            format!("step phase 3: Adam ({share:.0}% of parameter updates fused) + plain copy"),
+        )
+    };
+    out.push((two, median(&mut p1)));
+    out.push((three, median(&mut p2)));
     out.push(("= gradient step".into(), step));
     out
 }

@@ -242,7 +242,8 @@ pub struct StageClock {
 }
 
 impl StageClock {
-    fn start() -> Self {
+    /// A clock whose first stage starts now.
+    pub fn start() -> Self {
         Self { last: Some(std::time::Instant::now()), stages: Vec::new() }
     }
 
@@ -743,6 +744,26 @@ impl HostNet {
         dvelocity: Option<&[f32]>,
     ) -> (Vec<HostGrad>, StageClock) {
         let mut clock = StageClock::start();
+        let (head_grads, dh) = self.backward_heads(tape, dq, dvelocity);
+        clock.lap("heads");
+        let mut grads = self.backward_body(tape, &dh, &mut clock);
+        grads.extend(head_grads);
+        (grads, clock)
+    }
+
+    /// The first part of [`HostNet::backward`]: the heads' parameter gradients (in
+    /// parameter order) and the gradient of the representation `h` (`[B, width]`), from
+    /// which [`HostNet::backward_body`] goes on. Split so that a learner can update the
+    /// heads while the rest of the backward pass runs (see [`HostNet::release_heads`]).
+    ///
+    /// # Panics
+    /// As [`HostNet::backward`].
+    pub fn backward_heads(
+        &self,
+        tape: &Tape,
+        dq: &[f32],
+        dvelocity: Option<&[f32]>,
+    ) -> (Vec<HostGrad>, Vec<f32>) {
         let cfg = &self.config;
         let width = cfg.representation();
         let actions = cfg.actions;
@@ -765,6 +786,7 @@ impl HostNet {
             );
             douts.push(dvel.to_vec());
         }
+        assert!(self.heads.len() >= douts.len(), "backward_heads after release_heads");
         // Heads, side by side: the output layer, then the hidden layer and its share of dh.
         let h = &tape.h[..b * width];
         let per_head: Vec<(Vec<HostGrad>, Vec<f32>)> = self
@@ -793,13 +815,35 @@ impl HostNet {
             }
             head_grads.extend(g);
         }
-        clock.lap("heads");
+        (head_grads, dh)
+    }
+
+    /// Drops this network's references to the heads' weights, after
+    /// [`HostNet::backward_heads`]: an optimiser may then update them in place while
+    /// [`HostNet::backward_body`] (which does not read them) runs. The heads' forward and
+    /// backward passes panic afterwards.
+    pub fn release_heads(&mut self) {
+        self.heads.clear();
+    }
+
+    /// The rest of [`HostNet::backward`] from the gradient of the representation `dh`
+    /// (`[B, width]`, from [`HostNet::backward_heads`]): the fusion's and the streams'
+    /// parameter gradients, in parameter order, each stage timed on `clock`.
+    ///
+    /// # Panics
+    /// If `dh` does not fit the tape.
+    pub fn backward_body(&self, tape: &Tape, dh: &[f32], clock: &mut StageClock) -> Vec<HostGrad> {
+        let cfg = &self.config;
+        let width = cfg.representation();
+        let b = dh.len() / width.max(1);
+        assert!(dh.len() == b * width && b <= tape.batch, "dh size");
+        let h = &tape.h[..b * width];
         let depth_width = self.depth.as_ref().map_or(0, |_| cfg.depth_features());
         let fusion_width = self.fusion.as_ref().map_or(0, |f| f[2].dims().1);
         let laser_width = self.laser.as_ref().map_or(0, |_| cfg.laser_features());
         let laser_at = depth_width + fusion_width;
-        let mut d_dfeat = columns(&dh, b, width, 0, depth_width);
-        let mut d_lfeat = columns(&dh, b, width, laser_at, laser_width);
+        let mut d_dfeat = columns(dh, b, width, 0, depth_width);
+        let mut d_lfeat = columns(dh, b, width, laser_at, laser_width);
         let mut fusion_grads = Vec::new();
         if let Some([fd, fl, fo]) = &self.fusion {
             let [d, l, z, f] = &tape.fusion;
@@ -809,7 +853,7 @@ impl HostNet {
                 &z[..b * FUSION_D * FUSION_L],
                 &f[..b * fusion_width],
             );
-            let mut df = columns(&dh, b, width, depth_width, fusion_width);
+            let mut df = columns(dh, b, width, depth_width, fusion_width);
             relu_backward(&mut df, f);
             let mut dz = vec![0.0; z.len()];
             let mut g_out = Vec::new();
@@ -842,8 +886,7 @@ impl HostNet {
         let mut grads: Vec<HostGrad> = depth_grads.unwrap_or_default();
         grads.extend(laser_grads.unwrap_or_default());
         grads.extend(fusion_grads);
-        grads.extend(head_grads);
-        (grads, clock)
+        grads
     }
 
     /// The depth stream's gradients from its features' (first `b` rows of the tape).
