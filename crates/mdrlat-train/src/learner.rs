@@ -499,8 +499,8 @@ impl Learner {
 
     /// [`Learner::update`] on the host kernels. The heads' gradients come first in the
     /// backward pass; their Adam step (line 15 for 55 % of MDRLAT's parameters: a
-    /// memory-bound pass) runs beside the rest of the backward pass (compute-bound
-    /// products), then the rest's Adam step. Each parameter's update is the same
+    /// memory-bound pass) runs beside the fusion's backward (compute-bound products), the
+    /// fusion's Adam step beside the streams' backward, then the streams' Adam step. Each parameter's update is the same
     /// arithmetic on the same gradient as in one step after the whole backward pass, so the
     /// result is the same bytes (the resume and learner tests hold it to that).
     fn host_update(
@@ -526,13 +526,20 @@ impl Learner {
         let head_grads = to_params(head_grads);
         let net = self.take_online();
         let (optim, lr) = (&mut self.optim, self.learning_rate);
-        let (net, body_grads) = rayon::join(
+        let mut clock = mdrlat_nn::host::StageClock::start();
+        let (net, (fusion_grads, d_feat)) = rayon::join(
             || optim.step(lr, net, head_grads),
-            || online.backward_body(&tape, &dh, &mut mdrlat_nn::host::StageClock::start()),
+            || online.backward_fusion(&tape, &dh, &mut clock),
         );
-        // The network's last references to the body's weights go before their step.
+        online.release_fusion();
+        let fusion_grads = to_params(fusion_grads);
+        let (net, stream_grads) = rayon::join(
+            || optim.step(lr, net, fusion_grads),
+            || online.backward_streams(&tape, &d_feat, &mut clock),
+        );
+        // The network's last references to the streams' weights go before their step.
         drop(online);
-        self.online = self.optim.step(lr, net, to_params(body_grads));
+        self.online = self.optim.step(lr, net, to_params(stream_grads));
         self.plain = self.online.valid();
         let ms = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64() * 1e3;
         self.phase_ms = [ms(t0, t1), ms(t1, t2), ms(t2, std::time::Instant::now())];

@@ -307,6 +307,9 @@ pub struct HostNet {
     fusion: Option<[HostLinear; 3]>,
     /// value, advantage, velocity: hidden and output layers.
     heads: Vec<[HostLinear; 2]>,
+    /// Whether [`HostNet::release_fusion`] dropped the fusion (`fusion` is `None` then even
+    /// for a variant that has one).
+    fusion_released: bool,
 }
 
 impl std::fmt::Debug for HostNet {
@@ -412,7 +415,7 @@ impl HostNet {
         if let Some(v) = &net.velocity {
             heads.push(head(v)?);
         }
-        Some(Self { config: config.clone(), depth, laser, fusion, heads })
+        Some(Self { config: config.clone(), depth, laser, fusion, heads, fusion_released: false })
     }
 
     /// The forward pass; `velocity`: also run the auxiliary head (training), else only the
@@ -828,11 +831,34 @@ impl HostNet {
 
     /// The rest of [`HostNet::backward`] from the gradient of the representation `dh`
     /// (`[B, width]`, from [`HostNet::backward_heads`]): the fusion's and the streams'
-    /// parameter gradients, in parameter order, each stage timed on `clock`.
+    /// parameter gradients, in parameter order, each stage timed on `clock`
+    /// ([`HostNet::backward_fusion`], then [`HostNet::backward_streams`]).
     ///
     /// # Panics
     /// If `dh` does not fit the tape.
     pub fn backward_body(&self, tape: &Tape, dh: &[f32], clock: &mut StageClock) -> Vec<HostGrad> {
+        let (fusion_grads, d_feat) = self.backward_fusion(tape, dh, clock);
+        let mut grads = self.backward_streams(tape, &d_feat, clock);
+        grads.extend(fusion_grads);
+        grads
+    }
+
+    /// The bilinear fusion's part of the backward pass from `dh` (`[B, width]`): its
+    /// parameter gradients (none without a fusion), and the gradients of the depth and the
+    /// laser features (`[B, depth_features]`, `[B, laser_features]`: their direct share of
+    /// `dh` plus the fusion's) for [`HostNet::backward_streams`]. After it, an optimiser may
+    /// update the fusion's weights in place while the streams go back
+    /// ([`HostNet::release_fusion`]).
+    ///
+    /// # Panics
+    /// If `dh` does not fit the tape, or after [`HostNet::release_fusion`].
+    pub fn backward_fusion(
+        &self,
+        tape: &Tape,
+        dh: &[f32],
+        clock: &mut StageClock,
+    ) -> (Vec<HostGrad>, [Vec<f32>; 2]) {
+        assert!(!self.fusion_released, "backward_fusion after release_fusion");
         let cfg = &self.config;
         let width = cfg.representation();
         let b = dh.len() / width.max(1);
@@ -878,14 +904,43 @@ impl HostNet {
             fusion_grads = [g_d, g_l, g_out].into_iter().flatten().collect();
             clock.lap("bilinear fusion: input layers");
         }
+        (fusion_grads, [d_dfeat, d_lfeat])
+    }
+
+    /// Drops this network's references to the fusion's weights, after
+    /// [`HostNet::backward_fusion`] (as [`HostNet::release_heads`] for the heads).
+    pub fn release_fusion(&mut self) {
+        self.fusion = None;
+        self.fusion_released = true;
+    }
+
+    /// The streams' part of the backward pass from the gradients of their features
+    /// (`d_feat`, from [`HostNet::backward_fusion`]): their parameter gradients, depth then
+    /// laser, the two streams side by side.
+    ///
+    /// # Panics
+    /// If the gradients do not fit the tape.
+    pub fn backward_streams(
+        &self,
+        tape: &Tape,
+        d_feat: &[Vec<f32>; 2],
+        clock: &mut StageClock,
+    ) -> Vec<HostGrad> {
+        let cfg = &self.config;
+        let [d_dfeat, d_lfeat] = d_feat;
+        let b = if self.depth.is_some() {
+            d_dfeat.len() / cfg.depth_features().max(1)
+        } else {
+            d_lfeat.len() / cfg.laser_features().max(1)
+        };
+        assert!(b <= tape.batch, "feature gradients of {b} rows, the tape has {}", tape.batch);
         let (depth_grads, laser_grads) = rayon::join(
-            || self.depth.as_ref().map(|layers| self.depth_backward(layers, tape, &d_dfeat, b)),
-            || self.laser.as_ref().map(|layers| self.laser_backward(layers, tape, &d_lfeat, b)),
+            || self.depth.as_ref().map(|layers| self.depth_backward(layers, tape, d_dfeat, b)),
+            || self.laser.as_ref().map(|layers| self.laser_backward(layers, tape, d_lfeat, b)),
         );
         clock.lap("streams (depth beside laser)");
         let mut grads: Vec<HostGrad> = depth_grads.unwrap_or_default();
         grads.extend(laser_grads.unwrap_or_default());
-        grads.extend(fusion_grads);
         grads
     }
 
