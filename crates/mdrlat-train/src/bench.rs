@@ -320,10 +320,10 @@ pub fn profile(
     ));
     let (two, three) = if learner.uses_host_kernels() {
         (
-            "step phase 2: losses and the heads' backward".to_string(),
+            "step phase 2: the heads' backward".to_string(),
             format!(
-                "step phase 3: rest of the backward beside the heads' Adam, then its Adam \
-                 ({share:.0}% of parameter updates fused)"
+                "step phase 3: the rest of the backward beside the heads' and the fusion's Adam, \
+                 then the streams' Adam ({share:.0}% of parameter updates fused)"
             ),
         )
     } else {
