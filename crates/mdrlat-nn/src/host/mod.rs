@@ -307,9 +307,6 @@ pub struct HostNet {
     fusion: Option<[HostLinear; 3]>,
     /// value, advantage, velocity: hidden and output layers.
     heads: Vec<[HostLinear; 2]>,
-    /// Whether [`HostNet::release_fusion`] dropped the fusion (`fusion` is `None` then even
-    /// for a variant that has one).
-    fusion_released: bool,
 }
 
 impl std::fmt::Debug for HostNet {
@@ -415,7 +412,7 @@ impl HostNet {
         if let Some(v) = &net.velocity {
             heads.push(head(v)?);
         }
-        Some(Self { config: config.clone(), depth, laser, fusion, heads, fusion_released: false })
+        Some(Self { config: config.clone(), depth, laser, fusion, heads })
     }
 
     /// The forward pass; `velocity`: also run the auxiliary head (training), else only the
@@ -433,6 +430,10 @@ impl HostNet {
     /// # Panics
     /// If an input the variant reads has the wrong size.
     pub fn forward_parts<'a>(&self, parts: &[HostInputs<'a>], velocity_rows: usize) -> Tape<'a> {
+        assert!(
+            !self.heads_released() && !self.fusion_released(),
+            "forward pass of a network after release_heads / release_fusion"
+        );
         let b: usize = parts.iter().map(|p| p.batch).sum();
         let cfg = &self.config;
         let mut t = Tape { batch: b, times: StageClock::start(), ..Tape::default() };
@@ -749,14 +750,16 @@ impl HostNet {
         let mut clock = StageClock::start();
         let (head_grads, dh) = self.backward_heads(tape, dq, dvelocity);
         clock.lap("heads");
-        let mut grads = self.backward_body(tape, &dh, &mut clock);
+        let (fusion_grads, d_feat) = self.backward_fusion(tape, &dh, &mut clock);
+        let mut grads = self.backward_streams(tape, &d_feat, &mut clock);
+        grads.extend(fusion_grads);
         grads.extend(head_grads);
         (grads, clock)
     }
 
     /// The first part of [`HostNet::backward`]: the heads' parameter gradients (in
     /// parameter order) and the gradient of the representation `h` (`[B, width]`), from
-    /// which [`HostNet::backward_body`] goes on. Split so that a learner can update the
+    /// which [`HostNet::backward_fusion`] goes on. Split so that a learner can update the
     /// heads while the rest of the backward pass runs (see [`HostNet::release_heads`]).
     ///
     /// # Panics
@@ -789,7 +792,7 @@ impl HostNet {
             );
             douts.push(dvel.to_vec());
         }
-        assert!(self.heads.len() >= douts.len(), "backward_heads after release_heads");
+        assert!(!self.heads_released(), "backward_heads after release_heads");
         // Heads, side by side: the output layer, then the hidden layer and its share of dh.
         let h = &tape.h[..b * width];
         let per_head: Vec<(Vec<HostGrad>, Vec<f32>)> = self
@@ -823,24 +826,20 @@ impl HostNet {
 
     /// Drops this network's references to the heads' weights, after
     /// [`HostNet::backward_heads`]: an optimiser may then update them in place while
-    /// [`HostNet::backward_body`] (which does not read them) runs. The heads' forward and
-    /// backward passes panic afterwards.
+    /// [`HostNet::backward_fusion`] and [`HostNet::backward_streams`] (which do not read
+    /// them) run. Forward passes and [`HostNet::backward_heads`] panic afterwards.
     pub fn release_heads(&mut self) {
         self.heads.clear();
     }
 
-    /// The rest of [`HostNet::backward`] from the gradient of the representation `dh`
-    /// (`[B, width]`, from [`HostNet::backward_heads`]): the fusion's and the streams'
-    /// parameter gradients, in parameter order, each stage timed on `clock`
-    /// ([`HostNet::backward_fusion`], then [`HostNet::backward_streams`]).
-    ///
-    /// # Panics
-    /// If `dh` does not fit the tape.
-    pub fn backward_body(&self, tape: &Tape, dh: &[f32], clock: &mut StageClock) -> Vec<HostGrad> {
-        let (fusion_grads, d_feat) = self.backward_fusion(tape, dh, clock);
-        let mut grads = self.backward_streams(tape, &d_feat, clock);
-        grads.extend(fusion_grads);
-        grads
+    /// Whether [`HostNet::release_heads`] has dropped the heads (every network has two).
+    fn heads_released(&self) -> bool {
+        self.heads.is_empty()
+    }
+
+    /// Whether [`HostNet::release_fusion`] has dropped a fusion the variant has.
+    fn fusion_released(&self) -> bool {
+        self.config.variant.bilinear_fusion() && self.fusion.is_none()
     }
 
     /// The bilinear fusion's part of the backward pass from `dh` (`[B, width]`): its
@@ -858,7 +857,7 @@ impl HostNet {
         dh: &[f32],
         clock: &mut StageClock,
     ) -> (Vec<HostGrad>, [Vec<f32>; 2]) {
-        assert!(!self.fusion_released, "backward_fusion after release_fusion");
+        assert!(!self.fusion_released(), "backward_fusion after release_fusion");
         let cfg = &self.config;
         let width = cfg.representation();
         let b = dh.len() / width.max(1);
@@ -911,7 +910,6 @@ impl HostNet {
     /// [`HostNet::backward_fusion`] (as [`HostNet::release_heads`] for the heads).
     pub fn release_fusion(&mut self) {
         self.fusion = None;
-        self.fusion_released = true;
     }
 
     /// The streams' part of the backward pass from the gradients of their features
