@@ -155,6 +155,16 @@ impl FrameStack {
         self.frame(FRAME_STACK - 1)
     }
 
+    /// The stack oldest-first as one new vector (`FRAME_STACK * frame_len` values), copied
+    /// frame by frame: new memory is not zeroed first.
+    pub fn to_stacked_vec(&self) -> Vec<f32> {
+        let mut v = Vec::with_capacity(FRAME_STACK * self.frame_len);
+        for k in 0..FRAME_STACK {
+            v.extend_from_slice(self.frame(k));
+        }
+        v
+    }
+
     /// Writes the stack oldest-first through `f` (e.g. a normaliser) into `out`, which must
     /// hold `FRAME_STACK * frame_len` values: the `[4, …]` network input layout.
     pub fn write_stacked(&self, out: &mut [f32], f: impl Fn(&[f32], &mut [f32])) {
@@ -254,6 +264,7 @@ mod tests {
         let mut out = vec![0.0; 8];
         s.write_stacked(&mut out, |a, b| b.copy_from_slice(a));
         assert_eq!(out, [3.0, -3.0, 4.0, -4.0, 5.0, -5.0, 6.0, -6.0]);
+        assert_eq!(s.to_stacked_vec(), out);
         // Equality is by frames, not by where the ring's head is.
         let mut t = FrameStack::new(2);
         for i in 3..=6 {

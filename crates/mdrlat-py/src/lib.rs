@@ -55,25 +55,20 @@ pub struct Env {
 }
 
 /// An observation as a dict of numpy arrays, fresh ones (a single-env user may keep them):
-/// the stacks copied frame by frame into new vectors, with plain stores (the arrays are
-/// read soon, and new memory is better not zeroed first: zeroing and then copying took
-/// 37 % of a one-env step on an AMD EPYC Zen 4 VM).
+/// the stacks copied frame by frame into new vectors
+/// ([`mdrlat_core::FrameStack::to_stacked_vec`]), with plain stores (the arrays are read
+/// soon, and new memory is better not zeroed first: zeroing and then copying took 37 % of a
+/// one-env step on an AMD EPYC Zen 4 VM).
 fn observation_dict<'py>(py: Python<'py>, obs: &Observation) -> PyResult<Bound<'py, PyDict>> {
-    let stacked = |stack: &mdrlat_core::FrameStack| {
-        let mut v = Vec::with_capacity(FRAME_STACK * stack.frame_len());
-        for k in 0..FRAME_STACK {
-            v.extend_from_slice(stack.frame(k));
-        }
-        v
-    };
     let goal_len = if obs.goal.is_some() { GOAL_DIM } else { 0 };
     let (mut odom, mut goal) = (vec![0.0f32; 2 * ODOM_HISTORY], vec![0.0f32; goal_len]);
     write_vectors(obs, &mut odom, &mut goal);
     let d = PyDict::new(py);
-    let laser = Array2::from_shape_vec((FRAME_STACK, LASER_BEAMS), stacked(&obs.laser))
+    let laser = Array2::from_shape_vec((FRAME_STACK, LASER_BEAMS), obs.laser.to_stacked_vec())
         .map_err(|e| PyRuntimeError::new_err(format!("laser stack: {e}")))?;
-    let depth = Array3::from_shape_vec((FRAME_STACK, DEPTH_ROWS, DEPTH_COLS), stacked(&obs.depth))
-        .map_err(|e| PyRuntimeError::new_err(format!("depth stack: {e}")))?;
+    let depth =
+        Array3::from_shape_vec((FRAME_STACK, DEPTH_ROWS, DEPTH_COLS), obs.depth.to_stacked_vec())
+            .map_err(|e| PyRuntimeError::new_err(format!("depth stack: {e}")))?;
     d.set_item("laser", laser.into_pyarray(py))?;
     d.set_item("depth", depth.into_pyarray(py))?;
     d.set_item("odom", Array1::from_vec(odom).into_pyarray(py))?;

@@ -8,8 +8,7 @@ use crate::robot::RobotState;
 use crate::scene::StaticScene;
 use crate::sensors::{DepthCamera, Laser};
 use mdrlat_core::{
-    Action, DEPTH_LEN, FRAME_STACK, FrameStack, LASER_BEAMS, ODOM_HISTORY, Rng, Velocity,
-    goal_in_robot_frame,
+    Action, DEPTH_LEN, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY, Rng, Velocity, goal_in_robot_frame,
 };
 use mdrlat_geom::{GridScratch, Pose2, Prism, Vec2};
 use mdrlat_world::World;
@@ -560,12 +559,11 @@ impl Env {
 
     /// The environment's changing state (see [`EnvState`]).
     pub fn state(&self) -> EnvState {
-        let stacked = |s: &FrameStack| (0..FRAME_STACK).flat_map(|k| s.frame(k).to_vec()).collect();
         EnvState {
             robot: self.robot,
             pedestrians: self.pedestrians.clone(),
-            laser_frames: stacked(&self.obs.laser),
-            depth_frames: stacked(&self.obs.depth),
+            laser_frames: self.obs.laser.to_stacked_vec(),
+            depth_frames: self.obs.depth.to_stacked_vec(),
             odom: self.obs.odom,
             rng: self.rng.clone(),
             noise_rng: self.noise_rng.clone(),
