@@ -430,11 +430,13 @@ impl QNet {
 
     /// Milliseconds of each stage of one forward pass and, with `backward` (on an autodiff
     /// device only), of its backward pass: each stage's inputs are detached, so a stage's
-    /// backward time is its own. For `mdrlat bench train --profile`.
+    /// backward time is its own; `goal` joins the representation as in the forward pass
+    /// (the navigation task). For `mdrlat bench train --profile`.
     pub fn stage_times(
         &self,
         laser: Option<Tensor<3>>,
         depth: Option<DepthInput>,
+        goal: Option<Tensor<2>>,
         backward: bool,
     ) -> Vec<StageTime> {
         let mut times = Vec::new();
@@ -467,7 +469,7 @@ impl QNet {
             }
             _ => None,
         };
-        let h = Tensor::cat([d, f, l].into_iter().flatten().collect(), 1);
+        let h = Tensor::cat([d, f, l, goal].into_iter().flatten().collect(), 1);
         timed("value head", &mut || self.value.forward(h.clone()));
         timed("advantage head", &mut || self.advantage.forward(h.clone()));
         if let Some(v) = &self.velocity {

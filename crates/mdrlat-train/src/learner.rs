@@ -695,8 +695,8 @@ impl Learner {
     /// Forward and backward times of each stage of the online network on `batch`
     /// (with autodiff, as in a gradient step), milliseconds.
     pub fn stage_times(&self, batch: &Batch) -> Vec<mdrlat_nn::StageTime> {
-        let (l, d, _) = self.inputs::<true>(batch, false);
-        self.online.stage_times(l, d, true)
+        let (l, d, g) = self.inputs::<true>(batch, false);
+        self.online.stage_times(l, d, g, true)
     }
 
     /// On the host kernels: each stage's forward and backward milliseconds of one pass of

@@ -127,6 +127,19 @@ pub fn observation_inputs(
     Ok(())
 }
 
+/// `path` as a policy's name shows it: relative to the working directory where it lies
+/// below it (a sweep passes absolute paths; its tables and titles should not name the
+/// machine's folders), else as given.
+fn shown(path: &Path) -> String {
+    std::env::current_dir()
+        .ok()
+        .and_then(|cwd| path.strip_prefix(cwd).ok().map(Path::to_path_buf))
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or_else(|| path.to_path_buf())
+        .display()
+        .to_string()
+}
+
 impl GreedyPolicy {
     /// The online network of a run's checkpoint (`path`: a run directory or a checkpoint
     /// folder), or a model file (`path`: a `.safetensors` file written by
@@ -145,7 +158,7 @@ impl GreedyPolicy {
                 net,
                 device,
                 threads,
-                format!("{}{step}", model.display()),
+                format!("{}{step}", shown(&model)),
             );
         }
         let dir = checkpoint_dir(path)?;
@@ -158,7 +171,7 @@ impl GreedyPolicy {
             net,
             device,
             threads,
-            format!("{} (step {})", dir.display(), meta.step),
+            format!("{} (step {})", shown(&dir), meta.step),
         )
     }
 
@@ -356,4 +369,23 @@ fn pad_rows(inputs: &mut Inputs, rows: usize) {
     inputs.depth.resize(d * rows, 0.0);
     inputs.goal.resize(g * rows, 0.0);
     inputs.size = rows;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shown;
+    use std::path::Path;
+
+    #[test]
+    fn a_policy_names_its_path_relative_to_the_working_directory() {
+        let cwd = std::env::current_dir().expect("cwd");
+        assert_eq!(
+            shown(&cwd.join("sweep/train/mdrlat-s0/checkpoint")),
+            "sweep/train/mdrlat-s0/checkpoint"
+        );
+        assert_eq!(shown(Path::new("runs/a")), "runs/a");
+        assert_eq!(shown(&cwd), cwd.display().to_string());
+        let outside = Path::new("/nonexistent-root-for-test/run");
+        assert_eq!(shown(outside), "/nonexistent-root-for-test/run");
+    }
 }
