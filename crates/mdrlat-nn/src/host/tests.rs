@@ -182,3 +182,19 @@ fn bf16_weights_give_nearly_the_f32_q_values() {
         assert!(err > 0.0 && err < 2e-2, "{variant}: relative error {err}");
     }
 }
+
+/// The blocked transpose of the input gradients against the definition, with a tail block,
+/// written and accumulated.
+#[test]
+fn transpose_into_matches_the_definition() {
+    for (din, batch) in [(1, 1), (16, 3), (37, 32), (100, 5)] {
+        let dxt: Vec<f32> = (0..din * batch).map(|v| v as f32 * 0.5 - 3.0).collect();
+        let want: Vec<f32> = (0..batch * din).map(|i| dxt[(i % din) * batch + i / din]).collect();
+        let mut dx = vec![f32::NAN; batch * din];
+        transpose_into(&dxt, din, batch, &mut dx, false);
+        assert_eq!(dx, want, "{din}x{batch}");
+        transpose_into(&dxt, din, batch, &mut dx, true);
+        let twice: Vec<f32> = want.iter().map(|v| 2.0 * v).collect();
+        assert_eq!(dx, twice, "{din}x{batch} accumulated");
+    }
+}
