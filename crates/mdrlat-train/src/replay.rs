@@ -12,6 +12,7 @@ use mdrlat_core::{
     DEPTH_LEN, FRAME_STACK, GOAL_DIM, LASER_BEAMS, ODOM_HISTORY, Rng, normalize_depth,
     normalize_goal, normalize_laser,
 };
+use rayon::prelude::*;
 use std::collections::VecDeque;
 
 /// A frame's id: frames are numbered in push order.
@@ -273,25 +274,21 @@ impl ReplayBuffer {
         out.odom.clear();
         out.goal.clear();
         out.next_goal.clear();
-        let mut scratch = Vec::with_capacity(DEPTH_LEN);
-        for (row, &i) in indices.iter().enumerate() {
+        // The stacks, a row per task on the pool's threads (each row is its own; the
+        // conversion and normalisation of 8 frames a row are most of a batch's sampling).
+        let (ls, ds) = (lasers / b.max(1), depths / b.max(1));
+        let (l, nl) = (rows(&mut out.laser, ls, b), rows(&mut out.next_laser, ls, b));
+        let (d, nd) = (rows(&mut out.depth, ds, b), rows(&mut out.next_depth, ds, b));
+        l.into_par_iter().zip(nl).zip(d).zip(nd).zip(indices).for_each_init(
+            || Vec::with_capacity(DEPTH_LEN),
+            |scratch, ((((l, nl), d), nd), &i)| {
+                let t = &self.transitions[i];
+                self.write_stack(&t.obs, l, d, scratch);
+                self.write_stack(&t.next, nl, nd, scratch);
+            },
+        );
+        for &i in indices {
             let t = &self.transitions[i];
-            let (lr, dr) = (
-                if self.keep_laser { row * ls..(row + 1) * ls } else { 0..0 },
-                if self.keep_depth { row * ds..(row + 1) * ds } else { 0..0 },
-            );
-            self.write_stack(
-                &t.obs,
-                &mut out.laser[lr.clone()],
-                &mut out.depth[dr.clone()],
-                &mut scratch,
-            );
-            self.write_stack(
-                &t.next,
-                &mut out.next_laser[lr],
-                &mut out.next_depth[dr],
-                &mut scratch,
-            );
             out.actions.push(i64::from(t.action));
             out.rewards.push(t.reward);
             out.terminated.push(if t.terminated { 1.0 } else { 0.0 });
@@ -302,6 +299,15 @@ impl ReplayBuffer {
             }
         }
     }
+}
+
+/// `v` as `batch` rows of `len` values (`batch` empty rows when `len` is 0: a sensor the
+/// variant does not keep).
+fn rows(v: &mut [f32], len: usize, batch: usize) -> Vec<&mut [f32]> {
+    if len == 0 {
+        return (0..batch).map(|_| Default::default()).collect();
+    }
+    v.chunks_mut(len).collect()
 }
 
 /// Magic and version of the replay file format.

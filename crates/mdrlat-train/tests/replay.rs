@@ -25,12 +25,24 @@ fn close(a: &[f32], b: &[f32], tol: f32) -> bool {
 
 #[test]
 fn sampled_transitions_equal_what_the_env_produced() {
+    sampled_transitions_equal(true, true);
+}
+
+/// A buffer of one sensor (laser-only and depth-only runs) samples that sensor's stacks in
+/// full and leaves the other's empty.
+#[test]
+fn a_one_sensor_buffer_samples_its_sensor() {
+    sampled_transitions_equal(true, false);
+    sampled_transitions_equal(false, true);
+}
+
+fn sampled_transitions_equal(keep_laser: bool, keep_depth: bool) {
     let world = mdrlat_world::builtin::get("train").expect("builtin").expect("valid");
     let sim = SimConfig { max_episode_steps: 23, ..SimConfig::default() };
     let mut env = Env::from_world(world, sim).expect("env");
     env.reset(Some(3)).expect("reset");
     // Small buffer: 40 transitions, so 150 steps wrap it several times.
-    let mut buf = ReplayBuffer::new(40, 8, true, true);
+    let mut buf = ReplayBuffer::new(40, 8, keep_laser, keep_depth);
     let first = buf.push_frame(env.observation().laser.latest(), env.observation().depth.latest());
     let mut stack: [FrameId; 4] = [first; 4];
     let mut expected: Vec<Expected> = Vec::new();
@@ -75,17 +87,32 @@ fn sampled_transitions_equal_what_the_env_produced() {
     let (ls, ds) = (FRAME_STACK * LASER_BEAMS, FRAME_STACK * DEPTH_LEN);
     // Millimetre storage: 0.5 mm error, i.e. 0.5e-3 / 5.6 laser and 0.5e-3 / 5 depth units.
     let (tl, td) = (0.6e-3 / 5.6, 0.6e-3 / 5.0);
+    let n = held.len();
+    for (kept, stacks, len) in [
+        (keep_laser, [&batch.laser, &batch.next_laser], ls),
+        (keep_depth, [&batch.depth, &batch.next_depth], ds),
+    ] {
+        for v in stacks {
+            assert_eq!(v.len(), if kept { n * len } else { 0 });
+        }
+    }
     for (row, e) in held.iter().enumerate() {
-        assert!(close(&batch.laser[row * ls..(row + 1) * ls], &e.0, tl), "laser s_t row {row}");
-        assert!(close(&batch.depth[row * ds..(row + 1) * ds], &e.1, td), "depth s_t row {row}");
-        assert!(
-            close(&batch.next_laser[row * ls..(row + 1) * ls], &e.2, tl),
-            "laser s_t+1 row {row}"
-        );
-        assert!(
-            close(&batch.next_depth[row * ds..(row + 1) * ds], &e.3, td),
-            "depth s_t+1 row {row}"
-        );
+        if keep_laser {
+            let (l, nl) = (
+                &batch.laser[row * ls..(row + 1) * ls],
+                &batch.next_laser[row * ls..(row + 1) * ls],
+            );
+            assert!(close(l, &e.0, tl), "laser s_t row {row}");
+            assert!(close(nl, &e.2, tl), "laser s_t+1 row {row}");
+        }
+        if keep_depth {
+            let (d, nd) = (
+                &batch.depth[row * ds..(row + 1) * ds],
+                &batch.next_depth[row * ds..(row + 1) * ds],
+            );
+            assert!(close(d, &e.1, td), "depth s_t row {row}");
+            assert!(close(nd, &e.3, td), "depth s_t+1 row {row}");
+        }
         assert_eq!(batch.actions[row], i64::from(e.4));
         assert_eq!(batch.rewards[row], e.5);
         assert_eq!(batch.terminated[row] == 1.0, e.6);
