@@ -88,31 +88,22 @@ fn sampled_transitions_equal(keep_laser: bool, keep_depth: bool) {
     // Millimetre storage: 0.5 mm error, i.e. 0.5e-3 / 5.6 laser and 0.5e-3 / 5 depth units.
     let (tl, td) = (0.6e-3 / 5.6, 0.6e-3 / 5.0);
     let n = held.len();
-    for (kept, stacks, len) in [
-        (keep_laser, [&batch.laser, &batch.next_laser], ls),
-        (keep_depth, [&batch.depth, &batch.next_depth], ds),
-    ] {
-        for v in stacks {
-            assert_eq!(v.len(), if kept { n * len } else { 0 });
+    // Per sensor: kept, its stacks of s_t and s_t+1, their expected values, row length,
+    // tolerance.
+    let sensors = [
+        ("laser", keep_laser, [&batch.laser, &batch.next_laser], [0, 2], ls, tl),
+        ("depth", keep_depth, [&batch.depth, &batch.next_depth], [1, 3], ds, td),
+    ];
+    for (name, kept, stacks, which, len, tol) in sensors {
+        for (v, w) in stacks.into_iter().zip(which) {
+            assert_eq!(v.len(), if kept { n * len } else { 0 }, "{name}");
+            for (row, e) in held.iter().enumerate().filter(|_| kept) {
+                let want = [&e.0, &e.1, &e.2, &e.3][w];
+                assert!(close(&v[row * len..(row + 1) * len], want, tol), "{name} {w} row {row}");
+            }
         }
     }
     for (row, e) in held.iter().enumerate() {
-        if keep_laser {
-            let (l, nl) = (
-                &batch.laser[row * ls..(row + 1) * ls],
-                &batch.next_laser[row * ls..(row + 1) * ls],
-            );
-            assert!(close(l, &e.0, tl), "laser s_t row {row}");
-            assert!(close(nl, &e.2, tl), "laser s_t+1 row {row}");
-        }
-        if keep_depth {
-            let (d, nd) = (
-                &batch.depth[row * ds..(row + 1) * ds],
-                &batch.next_depth[row * ds..(row + 1) * ds],
-            );
-            assert!(close(d, &e.1, td), "depth s_t row {row}");
-            assert!(close(nd, &e.3, td), "depth s_t+1 row {row}");
-        }
         assert_eq!(batch.actions[row], i64::from(e.4));
         assert_eq!(batch.rewards[row], e.5);
         assert_eq!(batch.terminated[row] == 1.0, e.6);
