@@ -3,12 +3,13 @@
     python python/benchmarks/speed.py [--mdrlat target/release/mdrlat] [--seconds 2]
         [--rounds 5] [--world train] [--json]
 
-Measures, round after round on the same machine: `mdrlat bench sim --json` (one env, and a
-VecEnv of 2 envs per thread on all cores), then `mdrlat.MdrlatEnv` (one env, random actions,
-reset at episode ends) and `mdrlat.VectorEnv` with the same number of envs and threads;
-prints the medians and each Python figure as a share of its Rust counterpart of the same
-round (shared virtual machines drift by 10 % between seconds: rounds side by side, the
-vector env measured right after the Rust vector figure). The Python figures include
+Measures, round after round on the same machine: `mdrlat bench sim --json` (one env, then a
+VecEnv of 2 envs per thread on all cores), then `mdrlat.VectorEnv` with the same number of
+envs and threads, right after the Rust vector figure, then `mdrlat.MdrlatEnv` (one env,
+random actions, reset at episode ends); prints the medians and each Python figure as a
+share of its Rust counterpart of the same round (shared virtual machines drift by 10 %
+between seconds: rounds side by side; the one-env pair has two measurements between its
+halves, the vector pair none). The Python figures include
 everything a Gymnasium user pays: the observation arrays (4 laser scans and 4 depth images
 per env and step, 336 KB), the info dicts, the autoreset bookkeeping.
 """
