@@ -280,7 +280,7 @@ impl ReplayBuffer {
         let (l, nl) = (rows(&mut out.laser, ls, b), rows(&mut out.next_laser, ls, b));
         let (d, nd) = (rows(&mut out.depth, ds, b), rows(&mut out.next_depth, ds, b));
         l.into_par_iter().zip(nl).zip(d).zip(nd).zip(indices).for_each_init(
-            || Vec::with_capacity(DEPTH_LEN),
+            || Vec::with_capacity(if self.keep_depth { DEPTH_LEN } else { LASER_BEAMS }),
             |scratch, ((((l, nl), d), nd), &i)| {
                 let t = &self.transitions[i];
                 self.write_stack(&t.obs, l, d, scratch);
@@ -304,6 +304,7 @@ impl ReplayBuffer {
 /// `v` as `batch` rows of `len` values (`batch` empty rows when `len` is 0: a sensor the
 /// variant does not keep).
 fn rows(v: &mut [f32], len: usize, batch: usize) -> Vec<&mut [f32]> {
+    debug_assert_eq!(v.len(), len * batch, "rows: {} values for {batch} x {len}", v.len());
     if len == 0 {
         return (0..batch).map(|_| Default::default()).collect();
     }

@@ -193,8 +193,10 @@ fn transpose_into_matches_the_definition() {
         let mut dx = vec![f32::NAN; batch * din];
         transpose_into(&dxt, din, batch, &mut dx, false);
         assert_eq!(dx, want, "{din}x{batch}");
+        let base: Vec<f32> = (0..batch * din).map(|i| (i % 7) as f32).collect();
+        let mut dx = base.clone();
         transpose_into(&dxt, din, batch, &mut dx, true);
-        let twice: Vec<f32> = want.iter().map(|v| 2.0 * v).collect();
-        assert_eq!(dx, twice, "{din}x{batch} accumulated");
+        let sum: Vec<f32> = want.iter().zip(&base).map(|(w, b)| b + w).collect();
+        assert_eq!(dx, sum, "{din}x{batch} accumulated");
     }
 }
