@@ -256,17 +256,17 @@ impl ReplayBuffer {
     /// in `out` are reused.
     pub fn write_batch(&self, indices: &[usize], out: &mut Batch) {
         let b = indices.len();
-        let (ls, ds) = (FRAME_STACK * LASER_BEAMS, FRAME_STACK * DEPTH_LEN);
-        let lasers = if self.keep_laser { b * ls } else { 0 };
-        let depths = if self.keep_depth { b * ds } else { 0 };
+        // Values a row of each sensor's stack (0 for a sensor the buffer does not keep).
+        let ls = if self.keep_laser { FRAME_STACK * LASER_BEAMS } else { 0 };
+        let ds = if self.keep_depth { FRAME_STACK * DEPTH_LEN } else { 0 };
         out.size = b;
         for (v, n) in [
-            (&mut out.laser, lasers),
-            (&mut out.next_laser, lasers),
-            (&mut out.depth, depths),
-            (&mut out.next_depth, depths),
+            (&mut out.laser, ls),
+            (&mut out.next_laser, ls),
+            (&mut out.depth, ds),
+            (&mut out.next_depth, ds),
         ] {
-            v.resize(n, 0.0);
+            v.resize(b * n, 0.0);
         }
         out.actions.clear();
         out.rewards.clear();
@@ -276,7 +276,6 @@ impl ReplayBuffer {
         out.next_goal.clear();
         // The stacks, a row per task on the pool's threads (each row is its own; the
         // conversion and normalisation of 8 frames a row are most of a batch's sampling).
-        let (ls, ds) = (lasers / b.max(1), depths / b.max(1));
         let (l, nl) = (rows(&mut out.laser, ls, b), rows(&mut out.next_laser, ls, b));
         let (d, nd) = (rows(&mut out.depth, ds, b), rows(&mut out.next_depth, ds, b));
         l.into_par_iter().zip(nl).zip(d).zip(nd).zip(indices).for_each_init(
