@@ -605,7 +605,9 @@ impl Learner {
         let (next, now) = (batch_inputs(batch, true), batch_inputs(batch, false));
         // The online pass over s (kept for the backward pass) beside the online and target
         // passes over s' (eq. 10); three 32-row passes side by side were faster on 2 cores
-        // than one stacked 64-row online pass (`HostNet::forward_parts`).
+        // than one stacked 64-row online pass (`HostNet::forward_parts`). (Re-measured on
+        // an Intel Xeon on 2026-12-03: stacking won `bench train` by ~3 % but lost real
+        // `mdrlat train` runs by ~1.5 ms a step; the README has the pairs.)
         let (tape, (online_next, target_next)) = rayon::join(
             || online.forward(&now, aux),
             || rayon::join(|| online.q_values(&next), || target.q_values(&next)),
