@@ -603,17 +603,20 @@ impl Learner {
         let b = batch.size;
         let aux = self.variant.auxiliary_task();
         let (next, now) = (batch_inputs(batch, true), batch_inputs(batch, false));
-        // The online pass over s (kept for the backward pass) beside the online and target
-        // passes over s' (eq. 10); three 32-row passes side by side were faster on 2 cores
-        // than one stacked 64-row online pass (`HostNet::forward_parts`). (Re-measured on
-        // an Intel Xeon on 2026-12-03: stacking won `bench train` by ~3 % but lost real
-        // `mdrlat train` runs by ~1.5 ms a step; the README has the pairs.)
-        let (tape, (online_next, target_next)) = rayon::join(
-            || online.forward(&now, aux),
-            || rayon::join(|| online.q_values(&next), || target.q_values(&next)),
+        // The online pass over s (kept for the backward pass) and over s' stacked into one
+        // 64-row pass, which reads the online weights once for both, beside the target pass
+        // over s' (eq. 10). Same bytes as three 32-row passes side by side. On an Intel Xeon
+        // on 2026-12-03, with the row-panel forward kernel (`gemm_short_by_long`), 3000-step
+        // MDRLAT runs took 82.4–85.9 s stacked against 86.4–89.6 s with three passes (and
+        // 87.2–90.2 s before that kernel); with the earlier kernel stacking had lost (91.0–91.7
+        // against 88.0–91.6 s).
+        let (tape, target_next) = rayon::join(
+            || online.forward_parts(&[now, next], if aux { b } else { 0 }),
+            || target.q_values(&next),
         );
-        let actions = tape.q().len() / b.max(1);
-        let y = host_targets(&online_next, &target_next, batch, self.gamma);
+        let online_next = &tape.q()[tape.q().len() / 2..];
+        let actions = online_next.len() / b.max(1);
+        let y = host_targets(online_next, &target_next, batch, self.gamma);
         // Eq. (13): mean over the batch of (y − Q(s, a))²; its gradient reaches Q(s, a) only.
         let mut dq = vec![0.0f32; b * actions];
         let (mut td, mut q_sum) = (0.0f32, 0.0f32);
