@@ -684,25 +684,114 @@ mod avx512 {
         /// If `a` holds fewer than `m · k` values.
         pub(super) fn new(m: usize, k: usize, a: &[f32]) -> Self {
             assert!(a.len() >= m * k, "PackedRows: {} values for {m}x{k}", a.len());
+            assert!(available(), "PackedRows: the kernel needs AVX-512F");
             let tiles = m.div_ceil(ROWS);
             let mut data = Aligned::new(tiles * ROWS * k);
-            let packed = data.as_mut_slice();
-            for (t, tile) in packed.chunks_exact_mut(ROWS * k).take(tiles).enumerate() {
+            for t in 0..tiles {
                 let rows = ROWS.min(m - t * ROWS);
-                let src = &a[t * ROWS * k..(t * ROWS + rows) * k];
-                for (p, step) in tile.chunks_exact_mut(ROWS).enumerate() {
-                    for (r, v) in step.iter_mut().take(rows).enumerate() {
-                        *v = src[r * k + p];
-                    }
+                // SAFETY: AVX-512F is available (asserted); rows t·8.. of `a` hold `rows × k`
+                // values (asserted above) and tile t of `data` holds `k × 8`.
+                unsafe {
+                    transpose_rows(
+                        a.as_ptr().add(t * ROWS * k),
+                        rows,
+                        k,
+                        data.as_mut_ptr().add(t * ROWS * k),
+                    );
                 }
             }
             Self { data, k }
+        }
+
+        /// Row `i`'s value at depth step `p`, as packed.
+        #[cfg(test)]
+        pub(super) fn get(&self, i: usize, p: usize) -> f32 {
+            let at = (i / ROWS) * ROWS * self.k + p * ROWS + i % ROWS;
+            self.data.data[at / 16].0[at % 16]
         }
 
         /// The packed tile that starts at row `i` (a multiple of 8).
         pub(super) fn tile(&self, i: usize) -> *const f32 {
             debug_assert_eq!(i % ROWS, 0, "packed rows start at a tile");
             self.data.as_ptr().wrapping_add(i * self.k)
+        }
+    }
+
+    /// Up to 8 rows of `k` floats (`src`, row-major) as `[k][8]` at `dst` (missing rows as
+    /// zeros): 16 depth steps at a time, the 8 rows loaded as vectors and transposed in
+    /// registers (two unpack stages within 128-bit lanes, then two lane shuffles) into 8
+    /// vectors of two depth steps each. (Copied one float at a time, the batch rows cost
+    /// as much as their multiply-adds in the narrow products: 32 × 64 × 1024.)
+    ///
+    /// # Safety
+    /// AVX-512F must be available; `src` must hold `rows × k` floats (`rows` ≤ 8) and
+    /// `dst` `k × 8`.
+    #[target_feature(enable = "avx512f")]
+    unsafe fn transpose_rows(src: *const f32, rows: usize, k: usize, dst: *mut f32) {
+        let mut p0 = 0;
+        while p0 < k {
+            let kr = (k - p0).min(16);
+            let m = mask(kr);
+            // SAFETY: row i < rows, columns p0.. under the mask are inside `src`.
+            let r: [__m512; ROWS] = std::array::from_fn(|i| {
+                if i < rows {
+                    unsafe { _mm512_maskz_loadu_ps(m, src.add(i * k + p0)) }
+                } else {
+                    _mm512_setzero_ps()
+                }
+            });
+            let lo = |a, b| _mm512_unpacklo_ps(a, b);
+            let hi = |a, b| _mm512_unpackhi_ps(a, b);
+            // Per 128-bit lane L (depth steps 4L..4L+4): pairs of rows interleaved.
+            let t = [
+                lo(r[0], r[1]),
+                hi(r[0], r[1]),
+                lo(r[2], r[3]),
+                hi(r[2], r[3]),
+                lo(r[4], r[5]),
+                hi(r[4], r[5]),
+                lo(r[6], r[7]),
+                hi(r[6], r[7]),
+            ];
+            let pd = |x| _mm512_castps_pd(x);
+            let ps = |x| _mm512_castpd_ps(x);
+            // u[j] (rows 0–3) and u[4 + j] (rows 4–7): depth step 4L + j in lane L.
+            let u = [
+                ps(_mm512_unpacklo_pd(pd(t[0]), pd(t[2]))),
+                ps(_mm512_unpackhi_pd(pd(t[0]), pd(t[2]))),
+                ps(_mm512_unpacklo_pd(pd(t[1]), pd(t[3]))),
+                ps(_mm512_unpackhi_pd(pd(t[1]), pd(t[3]))),
+                ps(_mm512_unpacklo_pd(pd(t[4]), pd(t[6]))),
+                ps(_mm512_unpackhi_pd(pd(t[4]), pd(t[6]))),
+                ps(_mm512_unpacklo_pd(pd(t[5]), pd(t[7]))),
+                ps(_mm512_unpackhi_pd(pd(t[5]), pd(t[7]))),
+            ];
+            // out[q]: depth steps 2q and 2q + 1, 8 rows each.
+            let mut out = [_mm512_setzero_ps(); 8];
+            for j in [0, 2] {
+                // Lanes 0–1 and 2–3 of rows 0–3 beside rows 4–7, for steps 4L + j, 4L + j + 1.
+                let x0 = _mm512_shuffle_f32x4::<0x44>(u[j], u[4 + j]);
+                let x1 = _mm512_shuffle_f32x4::<0x44>(u[j + 1], u[5 + j]);
+                let x2 = _mm512_shuffle_f32x4::<0xEE>(u[j], u[4 + j]);
+                let x3 = _mm512_shuffle_f32x4::<0xEE>(u[j + 1], u[5 + j]);
+                let q = j / 2;
+                out[q] = _mm512_shuffle_f32x4::<0x88>(x0, x1);
+                out[q + 2] = _mm512_shuffle_f32x4::<0xDD>(x0, x1);
+                out[q + 4] = _mm512_shuffle_f32x4::<0x88>(x2, x3);
+                out[q + 6] = _mm512_shuffle_f32x4::<0xDD>(x2, x3);
+            }
+            for (q, &v) in out.iter().enumerate().take(kr.div_ceil(2)) {
+                // SAFETY: steps p0 + 2q (and p0 + 2q + 1 where it exists) are inside `dst`.
+                unsafe {
+                    let at = dst.add((p0 + 2 * q) * ROWS);
+                    if 2 * q + 1 < kr {
+                        _mm512_storeu_ps(at, v);
+                    } else {
+                        _mm512_mask_storeu_ps(at, 0x00FF, v);
+                    }
+                }
+            }
+            p0 += kr;
         }
     }
 
@@ -934,13 +1023,6 @@ mod avx512 {
 
         fn as_ptr(&self) -> *const f32 {
             self.data.as_ptr().cast()
-        }
-
-        fn as_mut_slice(&mut self) -> &mut [f32] {
-            let len = self.data.len() * 16;
-            // SAFETY: `Line` is `repr(C)` around 16 floats, so the lines are `len` floats
-            // in a row, borrowed mutably with `self`.
-            unsafe { std::slice::from_raw_parts_mut(self.as_mut_ptr(), len) }
         }
     }
 
@@ -1214,6 +1296,26 @@ mod tests {
         }
     }
 
+    /// The batch rows' in-register transpose against the rows themselves: partial tiles,
+    /// depths around its blocks of 16 (odd tails too), zeros past the last row.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn packed_rows_are_the_rows_side_by_side() {
+        if !avx512::available() {
+            return;
+        }
+        for (m, k) in [(1, 1), (3, 17), (8, 16), (9, 33), (13, 37), (32, 130), (5, 2)] {
+            let a: Vec<f32> = (0..m * k).map(|v| v as f32 + 0.5).collect();
+            let packed = avx512::PackedRows::new(m, k, &a);
+            for i in 0..m.div_ceil(8) * 8 {
+                for p in 0..k {
+                    let want = if i < m { a[i * k + p] } else { 0.0 };
+                    assert_eq!(packed.get(i, p), want, "{m}x{k}: row {i}, step {p}");
+                }
+            }
+        }
+    }
+
     /// The short-by-long kernel against the definition on the shapes it meets: every row
     /// count of a register tile, column tails, strips split between threads, depths over a
     /// block, with and without accumulation.
@@ -1257,103 +1359,6 @@ mod tests {
             let mut single = vec![0.0f32; m * n];
             one.install(|| gemm_short_by_long(m, n, k, &a, &b, &mut single, false));
             assert_eq!(split, single);
-        }
-    }
-
-    /// Not a test: `cargo test --release -p mdrlat-nn kernel_timings -- --ignored
-    /// --nocapture` prints the forward kernels' rates (one thread, weights hot and cold).
-    #[test]
-    #[ignore = "timing, run by hand"]
-    #[allow(unsafe_code)]
-    fn kernel_timings() {
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
-        for (m, n, k) in [(32, 512, 4096), (32, 512, 8192), (64, 512, 4096)] {
-            let copies = (128 << 20) / (k * n * 4);
-            let a: Vec<f32> = (0..m * k).map(|v| ((v * 7) % 13) as f32 * 0.25 - 1.5).collect();
-            let bs: Vec<Vec<f32>> = (0..copies)
-                .map(|s| (0..k * n).map(|v| ((v * 5 + s) % 11) as f32 * 0.125 - 0.6).collect())
-                .collect();
-            let mut c = vec![0.0f32; m * n];
-            let mut want = vec![0.0f32; m * n];
-            gemm_short_by_long(m, n, k, &a, &bs[0], &mut want, false);
-            let rows = avx512::PackedRows::new(m, k, &a);
-            let mut got = vec![0.0f32; m * n];
-            unsafe {
-                avx512::packed(rows.tile(0), m, n, k, bs[0].as_ptr(), n, got.as_mut_ptr(), n, false)
-            };
-            let err = got.iter().zip(&want).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
-            let flop = 2.0 * (m * n * k) as f64;
-            let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("pool");
-            for round in 0..2 {
-                for (temp, cold) in [("hot", false), ("cold", true)] {
-                    let reps = 40;
-                    let t = std::time::Instant::now();
-                    two.install(|| {
-                        for r in 0..reps {
-                            let b = if cold { &bs[r % copies] } else { &bs[0] };
-                            gemm_short_by_long(m, n, k, &a, b, &mut c, true);
-                        }
-                    });
-                    let s = t.elapsed().as_secs_f64() / reps as f64;
-                    eprintln!(
-                        "{m}x{n}x{k} round {round} 2 threads {temp:4}: {:.3} ms {:.1} GFLOP/s",
-                        s * 1e3,
-                        flop / s / 1e9
-                    );
-                }
-            }
-            for round in 0..2 {
-                for (name, packed) in [("in place", false), ("packed", true)] {
-                    for (temp, cold) in [("hot", false), ("cold", true)] {
-                        let reps = 40;
-                        let t = std::time::Instant::now();
-                        one.install(|| {
-                            for r in 0..reps {
-                                let b = if cold { &bs[r % copies] } else { &bs[0] };
-                                if packed {
-                                    let rows = avx512::PackedRows::new(m, k, &a);
-                                    unsafe {
-                                        avx512::packed(
-                                            rows.tile(0),
-                                            m,
-                                            n,
-                                            k,
-                                            b.as_ptr(),
-                                            n,
-                                            c.as_mut_ptr(),
-                                            n,
-                                            true,
-                                        )
-                                    };
-                                } else {
-                                    unsafe {
-                                        avx512::short_by_long(
-                                            m,
-                                            n,
-                                            k,
-                                            a.as_ptr(),
-                                            (k, 1),
-                                            b.as_ptr(),
-                                            n,
-                                            c.as_mut_ptr(),
-                                            n,
-                                            true,
-                                            avx512::KC,
-                                            false,
-                                        )
-                                    };
-                                }
-                            }
-                        });
-                        let s = t.elapsed().as_secs_f64() / reps as f64;
-                        eprintln!(
-                            "{m}x{n}x{k} round {round} {name:8} {temp:4}: {:.3} ms {:.1} GFLOP/s (max err {err})",
-                            s * 1e3,
-                            flop / s / 1e9
-                        );
-                    }
-                }
-            }
         }
     }
 

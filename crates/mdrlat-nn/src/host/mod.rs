@@ -27,6 +27,52 @@ use conv::{
 use gemm::{Conv16, Mat, conv16, conv16_weight_grad, gemm_new, gemm_short_by_long, gemm_tall};
 use rayon::prelude::*;
 
+/// A linear layer's three matrix products as the host kernels compute them, public for the
+/// criterion benches (`cargo bench -p mdrlat-nn`); not a stable interface.
+#[doc(hidden)]
+pub mod products {
+    use super::gemm::{Mat, gemm, gemm_short_by_long, gemm_tall};
+
+    /// The forward product `y += x · W` (`x` `[batch, din]`, `W` `[din, dout]`).
+    pub fn forward(batch: usize, din: usize, dout: usize, x: &[f32], w: &[f32], y: &mut [f32]) {
+        gemm_short_by_long(batch, dout, din, x, w, y, true);
+    }
+
+    /// The same product through the `gemm` crate (the library of `bench train`'s reference).
+    pub fn forward_gemm_crate(
+        batch: usize,
+        din: usize,
+        dout: usize,
+        x: &[f32],
+        w: &[f32],
+        y: &mut [f32],
+    ) {
+        gemm(batch, dout, din, Mat::n(x), Mat::n(w), y, true);
+    }
+
+    /// The weight gradient `xᵀ · dy` (`[din, dout]`).
+    pub fn weight_gradient(
+        batch: usize,
+        din: usize,
+        dout: usize,
+        x: &[f32],
+        dy: &[f32],
+    ) -> Vec<f32> {
+        gemm_tall(din, dout, batch, Mat::t(x), Mat::n(dy))
+    }
+
+    /// The input gradient, transposed: `W · dyᵀ` (`[din, batch]`).
+    pub fn input_gradient_t(
+        batch: usize,
+        din: usize,
+        dout: usize,
+        w: &[f32],
+        dy: &[f32],
+    ) -> Vec<f32> {
+        gemm_tall(din, batch, dout, Mat::n(w), Mat::t(dy))
+    }
+}
+
 /// Width of the heads' hidden layers, and the bilinear fusion's `L_d`, `L_l`.
 use crate::net::{FUSION_DEPTH as FUSION_D, FUSION_LASER as FUSION_L, HIDDEN};
 

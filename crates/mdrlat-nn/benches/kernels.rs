@@ -1,0 +1,97 @@
+//! Criterion benches of the host kernels' matrix products at the learner's shapes (batch 32
+//! and 64, MDRLAT's widest layers), in FLOP/s (criterion's "elements"), one thread and two:
+//! the issue-13 goal is half of `mdrlat bench train`'s reference GEMM rate for a whole step,
+//! so these say how far each product is from that. The weight is read either from cache
+//! (`hot`: one weight) or from memory (`cold`: 128 MB of weights in turn, as in a step,
+//! where every weight is read once per pass).
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use mdrlat_nn::host::products;
+use std::hint::black_box;
+
+/// Deterministic values in [-1.5, 1.5].
+fn values(len: usize, seed: usize) -> Vec<f32> {
+    (0..len).map(|v| ((v * 7 + seed) % 13) as f32 * 0.25 - 1.5).collect()
+}
+
+/// Enough copies of a `din × dout` weight to fill 128 MB (at least one).
+fn weights(din: usize, dout: usize) -> Vec<Vec<f32>> {
+    let copies = ((128 << 20) / (din * dout * 4)).max(1);
+    (0..copies).map(|s| values(din * dout, s)).collect()
+}
+
+fn pool(threads: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool")
+}
+
+fn forward(c: &mut Criterion) {
+    let mut g = c.benchmark_group("linear_forward_flops");
+    for (batch, din, dout) in [(32, 4096, 512), (32, 8192, 512), (64, 4096, 512), (32, 1024, 64)] {
+        let x = values(batch * din, 1);
+        let ws = weights(din, dout);
+        let mut y = vec![0.0f32; batch * dout];
+        g.throughput(Throughput::Elements((2 * batch * din * dout) as u64));
+        for threads in [1, 2] {
+            let pool = pool(threads);
+            for (temp, cold) in [("hot", false), ("cold", true)] {
+                let id = format!("{batch}x{din}->{dout}/{threads}t/{temp}");
+                let mut i = 0;
+                g.bench_function(BenchmarkId::new("host", &id), |b| {
+                    b.iter(|| {
+                        i += usize::from(cold);
+                        let w = &ws[i % ws.len()];
+                        pool.install(|| products::forward(batch, din, dout, &x, w, &mut y));
+                        black_box(y[0]);
+                    })
+                });
+                if threads == 1 {
+                    g.bench_function(BenchmarkId::new("gemm_crate", &id), |b| {
+                        b.iter(|| {
+                            i += usize::from(cold);
+                            let w = &ws[i % ws.len()];
+                            pool.install(|| {
+                                products::forward_gemm_crate(batch, din, dout, &x, w, &mut y)
+                            });
+                            black_box(y[0]);
+                        })
+                    });
+                }
+            }
+        }
+    }
+    g.finish();
+}
+
+fn backward(c: &mut Criterion) {
+    let mut g = c.benchmark_group("linear_backward_flops");
+    let (batch, din, dout) = (32, 4096, 512);
+    let x = values(batch * din, 1);
+    let dy = values(batch * dout, 2);
+    let ws = weights(din, dout);
+    g.throughput(Throughput::Elements((2 * batch * din * dout) as u64));
+    for threads in [1, 2] {
+        let pool = pool(threads);
+        let id = format!("{batch}x{din}->{dout}/{threads}t");
+        g.bench_function(BenchmarkId::new("weight_gradient", &id), |b| {
+            b.iter(|| {
+                black_box(pool.install(|| products::weight_gradient(batch, din, dout, &x, &dy)))
+            })
+        });
+        let mut i = 0;
+        g.bench_function(BenchmarkId::new("input_gradient_cold", &id), |b| {
+            b.iter(|| {
+                i += 1;
+                let w = &ws[i % ws.len()];
+                black_box(pool.install(|| products::input_gradient_t(batch, din, dout, w, &dy)))
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(20);
+    targets = forward, backward
+}
+criterion_main!(benches);
