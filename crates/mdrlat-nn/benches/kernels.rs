@@ -5,9 +5,25 @@
 //! (`hot`: one weight) or from memory (`cold`: 128 MB of weights in turn, as in a step,
 //! where every weight is read once per pass).
 
-use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};
 use mdrlat_nn::host::products;
 use std::hint::black_box;
+
+/// The allocator `mdrlat` runs with, keeping freed memory as the CLI does: the gradient
+/// products return fresh multi-megabyte matrices, which glibc malloc (or a purging mimalloc)
+/// would hand back to the OS and fault in again at every call — a cost the learner does not
+/// pay.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
+#[allow(unsafe_code)]
+fn keep_freed_memory() {
+    // `mi_option_purge_delay` (see `mdrlat-cli`'s `keep_freed_memory`): -1, never purge.
+    const PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
+    // SAFETY: setting an option stores a value in mimalloc's option table; any value is
+    // valid for this option and it may be set at any time.
+    unsafe { libmimalloc_sys::mi_option_set(PURGE_DELAY, -1) };
+}
 
 /// Deterministic values in [-1.5, 1.5].
 fn values(len: usize, seed: usize) -> Vec<f32> {
@@ -94,4 +110,8 @@ criterion_group! {
     config = Criterion::default().sample_size(20);
     targets = forward, backward
 }
-criterion_main!(benches);
+fn main() {
+    keep_freed_memory();
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}
