@@ -648,12 +648,22 @@ mod avx512 {
                     b.wrapping_add((pc + kk) * ldb)
                 };
                 let more = wide && (jc + strip < n || pc + kk < k);
+                // One strip and one block (the input gradient `W · dyᵀ`): `b` stays in L2
+                // and each tile's rows of `a` are read once, from memory; the L2 prefetcher
+                // is handed the next tile's rows instead (a few rows of one weight row
+                // each, too short for the streamers to pick up).
+                let stream_a = wide && step == 1 && n <= strip && pc + kk >= k;
                 let mut ic = 0;
                 while ic < m {
                     let rows = [16, 12, 8, 4, 2, 1]
                         .into_iter()
                         .find(|&r| r <= tile_rows && r <= m - ic && (r != 12 || vectors == 2))
                         .unwrap_or(1);
+                    if stream_a {
+                        let next = tile_rows.min(m - ic - rows);
+                        ahead =
+                            Ahead::new(a.wrapping_add((ic + rows) * lda + pc), next, kk, lda, kk);
+                    }
                     let t = Tile {
                         k: kk,
                         a: unsafe { a.add(ic * lda + pc * step) },
