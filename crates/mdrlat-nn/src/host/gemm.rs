@@ -154,10 +154,12 @@ const SHORT_ROWS: usize = 128;
 
 /// `c = a · b` (or `c += a · b`) for a short `a` (`m × k` row-major: the rows of a batch)
 /// and a long row-major weight `b` (`k × n`): the forward product of every linear layer.
-/// On CPUs with AVX-512, a kernel that streams `b` once, in order, without packing it (the
-/// `gemm` crate first copies the whole weight into panels, which for a batch of 32 costs
-/// more memory traffic than the arithmetic: 1.64 → 1.10 ms for 32 × 4096 × 512 with the
-/// weight out of cache, on a Sapphire Rapids core); elsewhere the `gemm` crate.
+/// On CPUs with AVX-512, kernels that stream `b` once, in order (the `gemm` crate first
+/// copies the whole weight into panels, which for a batch of 32 costs more memory traffic
+/// than the arithmetic: 1.64 → 1.10 ms for 32 × 4096 × 512 with the weight out of cache,
+/// on a Sapphire Rapids core): wider than two vectors, `avx512::packed` (the batch rows
+/// packed once, each weight strip copied as its first tile reads it; the same product
+/// 0.96–1.23 ms); narrower, the in-place kernel. Elsewhere the `gemm` crate.
 ///
 /// # Panics
 /// If a slice is shorter than its matrix.
@@ -476,14 +478,18 @@ pub(crate) fn conv16_weight_grad(g: &Conv16, img: &[f32], dy: &[f32], dwt: &mut 
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
 mod avx512 {
-    //! The short-by-long product on AVX-512: 8 rows × 48 columns of `c` in 24 registers,
-    //! the weight read row by row in blocks of `KC` rows. While a block is multiplied, the
+    //! The short-by-long products on AVX-512: [`packed`] for the forward products, and
+    //! [`short_by_long`], reading its operands in place, for the rest. Both keep 8 rows ×
+    //! 48 columns of `c` in 24 registers (fewer rows, more or fewer columns at the edges)
+    //! and read the weight row by row in blocks of depth. What follows is the in-place one,
+    //! in blocks of `KC` rows. While a block is multiplied, the
     //! next block (its rows of this call's columns) is fetched into L2 a few lines per
     //! step of the register tiles, and each strip's successor within the block into L1.
     //! Without the L2 stream the kernel waits on memory: a strip's rows lie one weight row
     //! apart, three cache lines each, which the hardware prefetchers do not follow (32 ×
     //! 4096 × 512 with the weight out of cache, one AMD EPYC Zen 4 core: 55 → 70–80
-    //! GFLOP/s; a register tile with its operands in L1 runs at ~90).
+    //! GFLOP/s; a register tile with its operands in L1 runs at ~90 there, and at 211–228
+    //! on a Sapphire Rapids core, whose two full-width FMA units the packed kernel feeds).
     use std::arch::x86_64::*;
 
     /// A register tile's sums (`rows`: an iterator over its rows of vectors) added to
