@@ -1,0 +1,100 @@
+#!/usr/bin/env bash
+# The GPU measurements of one short lease on a CUDA machine, as one script: is the GPU there,
+# do the GPU backends agree with `cpu`, how fast is a gradient step on it (`bench train`), and
+# how many steps per second does a real `mdrlat train` run make. Everything it measures goes
+# to $OUT (default out/gpu): gpu-check.log (the whole transcript), bench-*.jsonl, the short
+# agreement runs' metrics.csv and the long run's metrics.csv, eval.csv and progress.csv.
+#
+#   MDRLAT_TCH_BIN=target-tch/release/mdrlat MDRLAT_WGPU_BIN=target-wgpu/release/mdrlat \
+#     LONG_SECONDS=240 bash scripts/gpu-check.sh
+#
+# `--device tch-cuda` needs a binary built with `--features tch` against the LibTorch of the
+# machine's own PyTorch, same version, with libtorch_cuda in the folder it was linked against
+# (burn-tch decides at build time whether a binary may use a GPU): on a machine without CUDA,
+# `MDRLAT_TORCH_VERSION=2.11.0 MDRLAT_TCH_CUDA=link bash scripts/setup-tch.sh` builds one.
+# It runs here with that PyTorch's lib folder on LD_LIBRARY_PATH.
+# `--device wgpu` needs a binary built with `--features wgpu` and a Vulkan loader.
+# Each stage has its own time limit and a failed stage does not stop the next.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+
+OUT=${OUT:-out/gpu}
+TCH=${MDRLAT_TCH_BIN:-target-tch/release/mdrlat}
+WGPU=${MDRLAT_WGPU_BIN:-}
+LONG_SECONDS=${LONG_SECONDS:-240}
+LONG_VARIANT=${LONG_VARIANT:-mdrlat}
+BENCH_SECONDS=${BENCH_SECONDS:-2}
+RUNS=${RUNS:-$(mktemp -d)}
+mkdir -p "$OUT"
+exec > >(tee -a "$OUT/gpu-check.log") 2>&1
+
+stage() { echo; echo "== $(date -u +%H:%M:%S) $*"; }
+
+stage "machine"
+nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm --format=csv 2>&1
+lscpu | grep -E "Model name|^CPU\(s\)" || true
+
+# LibTorch: the machine's PyTorch's own libraries.
+TORCH_LIB=${MDRLAT_TORCH_LIB:-$(python3 -c 'import os, torch; print(os.path.join(os.path.dirname(torch.__file__), "lib")); ' 2>/dev/null)}
+python3 -c 'import torch; print("torch", torch.__version__, "cuda", torch.version.cuda)' 2>&1 || true
+TCH_RUN=(env "LD_LIBRARY_PATH=$TORCH_LIB${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+  "GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=17179869184"
+  "$TCH")
+
+# Same seed, same 400 steps (300 gradient steps), on cpu and on the GPU: the losses of
+# metrics.csv side by side (LibTorch's cuDNN convolutions may use TF32, so not bit-equal).
+agree() { # device label binary-wrapper...
+  local device=$1 label=$2
+  shift 2
+  timeout 120 "$@" train --variant mdrlat --steps 400 --seed 3 --device "$device" \
+    --set train.learning_starts=100 --set train.eval_interval=400 --set train.eval_episodes=2 \
+    --out "$RUNS/agree-$label" && cp "$RUNS/agree-$label/metrics.csv" "$OUT/agree-$label.csv"
+}
+
+if [ -x "$TCH" ]; then
+  stage "tch-cuda: smoke"
+  if timeout 60 "${TCH_RUN[@]}" bench train --device tch-cuda --variants laser-only --seconds 0.2; then
+    stage "agreement: cpu and tch-cuda, 400-step MDRLAT runs"
+    agree cpu cpu "${TCH_RUN[@]}"
+    agree tch-cuda tch-cuda "${TCH_RUN[@]}"
+    paste -d'|' "$OUT/agree-cpu.csv" "$OUT/agree-tch-cuda.csv" 2>/dev/null | tail -3
+
+    stage "tch-cuda: bench train, all variants, batch 32"
+    timeout 200 "${TCH_RUN[@]}" bench train --device tch-cuda --json --seconds "$BENCH_SECONDS" |
+      tee "$OUT/bench-tch-cuda.jsonl"
+    stage "tch-cuda: where an MDRLAT step goes; batch 128 and 512"
+    timeout 60 "${TCH_RUN[@]}" bench train --device tch-cuda --variants mdrlat --profile --seconds 1
+    for b in 128 512; do
+      timeout 40 "${TCH_RUN[@]}" bench train --device tch-cuda --variants mdrlat --batch "$b" --seconds 1 --json |
+        grep '"bench":"train"' | tee -a "$OUT/bench-tch-cuda.jsonl"
+    done
+
+    stage "tch-cuda: a real $LONG_VARIANT run for ${LONG_SECONDS}s (paper settings)"
+    run="$RUNS/long"
+    "${TCH_RUN[@]}" train --device tch-cuda --variant "$LONG_VARIANT" --seed 0 --out "$run" &
+    pid=$!
+    echo "unix_s,step" >"$OUT/progress.csv"
+    start=$(date +%s)
+    while kill -0 "$pid" 2>/dev/null && [ $(($(date +%s) - start)) -lt "$LONG_SECONDS" ]; do
+      sleep 10
+      step=$(tail -n 1 "$run/metrics.csv" 2>/dev/null | cut -d, -f1)
+      echo "$(date +%s.%N),${step:-0}" | tee -a "$OUT/progress.csv"
+    done
+    kill -INT "$pid" 2>/dev/null
+    wait "$pid"
+    cp "$run/metrics.csv" "$OUT/long-metrics.csv"
+    cp "$run/eval.csv" "$OUT/long-eval.csv"
+  else
+    stage "tch-cuda failed to start: what the binary links"
+    LD_LIBRARY_PATH="$TORCH_LIB" ldd "$TCH" | grep -E "not found|torch|c10" || true
+  fi
+fi
+
+if [ -n "$WGPU" ] && [ -x "$WGPU" ]; then
+  stage "wgpu: Vulkan devices"
+  ls /usr/share/vulkan/icd.d /etc/vulkan/icd.d /usr/local/nvidia/share/vulkan/icd.d 2>&1 || true
+  stage "wgpu: bench train, laser-only and MDRLAT, batch 32"
+  timeout 150 "$WGPU" bench train --device wgpu --variants laser-only,mdrlat --json --seconds 1 |
+    tee "$OUT/bench-wgpu.jsonl"
+fi
+stage "done"
