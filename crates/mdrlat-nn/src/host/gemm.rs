@@ -247,9 +247,10 @@ pub(crate) fn gemm_short_by_long(
 /// summed by one thread in one order. One AMD EPYC Zen 4 core, side by side with the
 /// `gemm` crate: `xᵀ · dy` for 32 × 4096 × 512 55–76 → 76–82 GFLOP/s, `W · dyᵀ` with the
 /// weight out of cache 71–72 → 76–82. The weight gradients (`xᵀ · dy`: one block of depth,
-/// several strips) go row band by row band with each band of `xᵀ` packed: on a Sapphire
-/// Rapids Xeon (criterion, 2026-12-04) 90 → 99 GFLOP/s on one core, 172 → 194 on two;
-/// NumPy's OpenBLAS 0.3.31 ran the same product at 121 and 256 there.
+/// several strips) go row band by row band with each band of `xᵀ` packed and no hand-made
+/// fetches of `c`: on a Sapphire Rapids Xeon (criterion, 2026-12-04) 90 → 104–110 GFLOP/s
+/// on one core, 172 → 204–217 on two; NumPy's OpenBLAS 0.3.31 ran the same product at 121
+/// and 256 there.
 ///
 /// # Panics
 /// If a slice is shorter than its matrix.
@@ -675,13 +676,11 @@ mod avx512 {
                         let w = strip.min(n - jc);
                         let masks =
                             [mask(w), mask(w.saturating_sub(16)), mask(w.saturating_sub(32))];
-                        // This band's next strip of `b`, or the first again, to L1; and the
-                        // next tile's block of `c`.
-                        let (b_next, c_next) = if jc + strip < n {
-                            (jc + strip, ic * ldc + jc + strip)
-                        } else {
-                            (0, (ic + rows) * ldc)
-                        };
+                        // This band's next strip of `b`, or the first again, to L1. `c` is
+                        // not fetched for writing by hand here: the L2 streamer follows the
+                        // band, and the explicit fetches cost more than they saved (criterion,
+                        // one Sapphire Rapids core: 96–100 GFLOP/s with them, 104–110 without).
+                        let b_next = if jc + strip < n { jc + strip } else { 0 };
                         let t = Tile {
                             k: kk,
                             a: a_band,
@@ -694,8 +693,7 @@ mod avx512 {
                             masks,
                             add,
                             prefetch: Some(b.wrapping_add(pc * ldb + b_next)),
-                            c_next: (c_ahead && (jc + strip < n || ic + rows < m))
-                                .then(|| c.wrapping_add(c_next).cast_const()),
+                            c_next: None,
                         };
                         unsafe { run_tile(vectors, rows, &t, &mut ahead) };
                         jc += strip;
