@@ -253,21 +253,39 @@ impl ReplayBuffer {
     }
 
     /// Writes the stacks of frames `ids` (oldest first), normalised, into `laser` / `depth`.
-    fn write_stack(&self, ids: &[FrameId; FRAME_STACK], laser: &mut [f32], depth: &mut [f32]) {
+    /// Frames also in `written` — ids whose stacks are already in `done_laser` /
+    /// `done_depth`, e.g. `s` when writing `s'`, which shares its three older frames — are
+    /// copied from there instead of converted again (the same values: one stored frame).
+    fn write_stack(
+        &self,
+        ids: &[FrameId; FRAME_STACK],
+        (laser, depth): (&mut [f32], &mut [f32]),
+        written: Option<(&[FrameId; FRAME_STACK], &[f32], &[f32])>,
+    ) {
         let (laser_table, depth_table) = norm_tables();
         for (k, &id) in ids.iter().enumerate() {
+            // Frame k's values (indexed only for a sensor the buffer keeps).
+            let (l, d) =
+                (k * LASER_BEAMS..(k + 1) * LASER_BEAMS, k * DEPTH_LEN..(k + 1) * DEPTH_LEN);
+            if let Some((done, done_l, done_d)) = written
+                && let Some(j) = done.iter().position(|&other| other == id)
+            {
+                if self.keep_laser {
+                    laser[l].copy_from_slice(&done_l[j * LASER_BEAMS..(j + 1) * LASER_BEAMS]);
+                }
+                if self.keep_depth {
+                    depth[d].copy_from_slice(&done_d[j * DEPTH_LEN..(j + 1) * DEPTH_LEN]);
+                }
+                continue;
+            }
             let s = self.slot(id);
             if self.keep_laser {
-                laser_table.write(
-                    &self.laser_mm[s * LASER_BEAMS..(s + 1) * LASER_BEAMS],
-                    &mut laser[k * LASER_BEAMS..(k + 1) * LASER_BEAMS],
-                );
+                laser_table
+                    .write(&self.laser_mm[s * LASER_BEAMS..(s + 1) * LASER_BEAMS], &mut laser[l]);
             }
             if self.keep_depth {
-                depth_table.write(
-                    &self.depth_mm[s * DEPTH_LEN..(s + 1) * DEPTH_LEN],
-                    &mut depth[k * DEPTH_LEN..(k + 1) * DEPTH_LEN],
-                );
+                depth_table
+                    .write(&self.depth_mm[s * DEPTH_LEN..(s + 1) * DEPTH_LEN], &mut depth[d]);
             }
         }
     }
@@ -301,8 +319,8 @@ impl ReplayBuffer {
         l.into_par_iter().zip(nl).zip(d).zip(nd).zip(indices).for_each(
             |((((l, nl), d), nd), &i)| {
                 let t = &self.transitions[i];
-                self.write_stack(&t.obs, l, d);
-                self.write_stack(&t.next, nl, nd);
+                self.write_stack(&t.obs, (&mut *l, &mut *d), None);
+                self.write_stack(&t.next, (nl, nd), Some((&t.obs, l, d)));
             },
         );
         for &i in indices {
