@@ -673,9 +673,7 @@ mod avx512 {
                     };
                     let mut jc = 0;
                     while jc < n {
-                        let w = strip.min(n - jc);
-                        let masks =
-                            [mask(w), mask(w.saturating_sub(16)), mask(w.saturating_sub(32))];
+                        let masks = strip_masks(strip.min(n - jc));
                         // This band's next strip of `b`, or the first again, to L1. `c` is
                         // not fetched for writing by hand here: the L2 streamer follows the
                         // band, and the explicit fetches cost more than they saved (criterion,
@@ -705,8 +703,7 @@ mod avx512 {
             }
             let mut jc = 0;
             while jc < n {
-                let w = strip.min(n - jc);
-                let masks = [mask(w), mask(w.saturating_sub(16)), mask(w.saturating_sub(32))];
+                let masks = strip_masks(strip.min(n - jc));
                 // What the hardware should fetch while this strip is multiplied: the next
                 // strip of this block, or the first of the next block.
                 let next = if jc + strip < n {
@@ -752,6 +749,11 @@ mod avx512 {
             }
             pc += kk;
         }
+    }
+
+    /// The column masks of a strip `w` columns wide, one per vector of the register tile.
+    fn strip_masks(w: usize) -> [u16; 3] {
+        [mask(w), mask(w.saturating_sub(16)), mask(w.saturating_sub(32))]
     }
 
     /// The rows of the register tile that starts `left` rows before the end of `a`: the
@@ -958,8 +960,7 @@ mod avx512 {
                 Ahead::new(b.wrapping_add((pc + kk) * ldb), PKC.min(k - pc - kk), n, ldb, groups);
             let mut jc = 0;
             while jc < n {
-                let w = STRIP.min(n - jc);
-                let masks = [mask(w), mask(w.saturating_sub(16)), mask(w.saturating_sub(32))];
+                let masks = strip_masks(STRIP.min(n - jc));
                 for t in 0..tiles {
                     let ic = t * ROWS;
                     let tile = PackedTile {
