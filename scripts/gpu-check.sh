@@ -16,17 +16,21 @@
 # `--device wgpu` needs a binary built with `--features wgpu` and a Vulkan loader.
 # Each stage has its own time limit and a failed stage does not stop the next.
 set -uo pipefail
+# Paths given relative to where the script was started from, before moving to the root.
+absolute() { if [ -n "$1" ]; then realpath -m "$1"; fi; }
+TCH=$(absolute "${MDRLAT_TCH_BIN:-}")
+WGPU=$(absolute "${MDRLAT_WGPU_BIN:-}")
+OUT=$(absolute "${OUT:-}")
 cd "$(dirname "$0")/.."
-
+TCH=${TCH:-target-tch/release/mdrlat}
 OUT=${OUT:-out/gpu}
-TCH=${MDRLAT_TCH_BIN:-target-tch/release/mdrlat}
-WGPU=${MDRLAT_WGPU_BIN:-}
 LONG_SECONDS=${LONG_SECONDS:-240}
 LONG_VARIANT=${LONG_VARIANT:-mdrlat}
 BENCH_SECONDS=${BENCH_SECONDS:-2}
 RUNS=${RUNS:-$(mktemp -d)}
 mkdir -p "$OUT"
 exec > >(tee -a "$OUT/gpu-check.log") 2>&1
+TEE=$!
 
 stage() { echo; echo "== $(date -u +%H:%M:%S) $*"; }
 
@@ -37,6 +41,10 @@ lscpu | grep -E "Model name|^CPU\(s\)" || true
 # LibTorch: the machine's PyTorch's own libraries.
 TORCH_LIB=${MDRLAT_TORCH_LIB:-$(python3 -c 'import os, torch; print(os.path.join(os.path.dirname(torch.__file__), "lib")); ' 2>/dev/null)}
 python3 -c 'import torch; print("torch", torch.__version__, "cuda", torch.version.cuda)' 2>&1 || true
+if [ -z "$TORCH_LIB" ] || [ ! -d "$TORCH_LIB" ]; then
+  echo "no LibTorch: python3 cannot import torch and MDRLAT_TORCH_LIB is unset; skipping tch-cuda"
+  TCH=""
+fi
 TCH_RUN=(env "LD_LIBRARY_PATH=$TORCH_LIB${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
   "GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=17179869184"
   "$TCH")
@@ -51,7 +59,7 @@ agree() { # device label binary-wrapper...
     --out "$RUNS/agree-$label" && cp "$RUNS/agree-$label/metrics.csv" "$OUT/agree-$label.csv"
 }
 
-if [ -x "$TCH" ]; then
+if [ -n "$TCH" ] && [ -x "$TCH" ]; then
   stage "tch-cuda: smoke"
   if timeout 60 "${TCH_RUN[@]}" bench train --device tch-cuda --variants laser-only --seconds 0.2; then
     stage "agreement: cpu and tch-cuda, 400-step MDRLAT runs"
@@ -71,16 +79,19 @@ if [ -x "$TCH" ]; then
 
     stage "tch-cuda: a real $LONG_VARIANT run for ${LONG_SECONDS}s (paper settings)"
     run="$RUNS/long"
-    "${TCH_RUN[@]}" train --device tch-cuda --variant "$LONG_VARIANT" --seed 0 --out "$run" &
+    # A background job of a script ignores SIGINT, and `mdrlat train` has no handler: TERM,
+    # through `timeout` (which passes it on), with a bound in case this loop is cut short.
+    timeout -s TERM $((LONG_SECONDS + 60)) "${TCH_RUN[@]}" train --device tch-cuda \
+      --variant "$LONG_VARIANT" --seed 0 --out "$run" &
     pid=$!
     echo "unix_s,step" >"$OUT/progress.csv"
     start=$(date +%s)
     while kill -0 "$pid" 2>/dev/null && [ $(($(date +%s) - start)) -lt "$LONG_SECONDS" ]; do
       sleep 10
-      step=$(tail -n 1 "$run/metrics.csv" 2>/dev/null | cut -d, -f1)
+      step=$(tail -n +2 "$run/metrics.csv" 2>/dev/null | tail -n 1 | cut -d, -f1)
       echo "$(date +%s.%N),${step:-0}" | tee -a "$OUT/progress.csv"
     done
-    kill -INT "$pid" 2>/dev/null
+    kill -TERM "$pid" 2>/dev/null
     wait "$pid"
     cp "$run/metrics.csv" "$OUT/long-metrics.csv"
     cp "$run/eval.csv" "$OUT/long-eval.csv"
@@ -98,3 +109,6 @@ if [ -n "$WGPU" ] && [ -x "$WGPU" ]; then
     tee "$OUT/bench-wgpu.jsonl"
 fi
 stage "done"
+# Let tee write the last lines before $OUT is collected.
+exec 1>&- 2>&-
+wait "$TEE"

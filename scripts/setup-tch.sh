@@ -7,7 +7,8 @@
 #   target-tch/release/mdrlat bench train --device tch
 #
 #   # A CUDA binary for a GPU machine whose PyTorch is 2.11.0 (built here, without the CUDA
-#   # libraries; at run time that machine's torch/lib is on LD_LIBRARY_PATH):
+#   # libraries, into target-tch-cuda/; at run time that machine's torch/lib is on
+#   # LD_LIBRARY_PATH):
 #   MDRLAT_TORCH_VERSION=2.11.0 MDRLAT_TCH_CUDA=link bash scripts/setup-tch.sh
 #
 # Why it is done this way (measured on the 2-core CI machine kind, 2026-11):
@@ -53,7 +54,8 @@ DIR=${MDRLAT_TCH_DIR:-$DEFAULT_DIR}
 SITE=$DIR/site
 PYTHON=${PYTHON:-python3}
 
-if [ ! -f "$SITE/torch/lib/libtorch_cpu.so" ]; then
+# A folder set up for the CPU lacks the CUDA libraries that MDRLAT_TCH_CUDA=1 needs.
+if [ ! -f "$SITE/torch/lib/libtorch_cpu.so" ] || { [ "$CUDA" = 1 ] && [ ! -d "$SITE/nvidia/cudnn" ]; }; then
   mkdir -p "$SITE"
   if [ "$CUDA" = 1 ]; then
     "$PYTHON" -m pip install --target "$SITE" "torch==$TORCH_VERSION"
@@ -95,17 +97,21 @@ ENV
 # shellcheck disable=SC1091
 source "$DIR/env.sh"
 
-# A target folder of its own: the default (flex) build is not invalidated. RUSTFLAGS replaces
-# .cargo/config.toml's flags, so the link mode repeats its target-cpu.
+# A target folder of its own: the default (flex) build is not invalidated; the link mode's
+# its own too (other flags: switching would rebuild everything, and overwrite the CPU
+# binary). RUSTFLAGS replaces .cargo/config.toml's flags, so the link mode repeats its
+# target-cpu.
+TARGET=${CARGO_TARGET_DIR:-target-tch}
 if [ "$CUDA" = link ]; then
-  export RUSTFLAGS="-C target-cpu=x86-64-v3 -C link-arg=-Wl,--allow-shlib-undefined"
+  TARGET=${CARGO_TARGET_DIR:-target-tch-cuda}
+  export RUSTFLAGS="-C target-cpu=x86-64-v3 -C link-arg=-Wl,--allow-shlib-undefined${RUSTFLAGS:+ $RUSTFLAGS}"
 fi
-CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-target-tch} cargo build --release -p mdrlat-cli --features tch
+CARGO_TARGET_DIR=$TARGET cargo build --release -p mdrlat-cli --features tch
 echo
 if [ "$CUDA" = link ]; then
   echo "done: on the GPU machine, with its PyTorch $TORCH_VERSION's lib folder on LD_LIBRARY_PATH:"
-  echo "  MDRLAT_TCH_BIN=${CARGO_TARGET_DIR:-target-tch}/release/mdrlat bash scripts/gpu-check.sh"
+  echo "  MDRLAT_TCH_BIN=$TARGET/release/mdrlat bash scripts/gpu-check.sh"
 else
   echo "done: source $DIR/env.sh, then e.g."
-  echo "  ${CARGO_TARGET_DIR:-target-tch}/release/mdrlat bench train --device tch"
+  echo "  $TARGET/release/mdrlat bench train --device tch"
 fi

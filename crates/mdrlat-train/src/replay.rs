@@ -253,9 +253,9 @@ impl ReplayBuffer {
     }
 
     /// Writes the stacks of frames `ids` (oldest first), normalised, into `laser` / `depth`.
-    /// Frames also in `written` — ids whose stacks are already in `done_laser` /
-    /// `done_depth`, e.g. `s` when writing `s'`, which shares its three older frames — are
-    /// copied from there instead of converted again (the same values: one stored frame).
+    /// Frames also in `written` — `(ids, laser, depth)` of a stack already written, e.g. `s`
+    /// when writing `s'`, which shares its three older frames — are copied from there
+    /// instead of converted again (the same values: one stored frame).
     fn write_stack(
         &self,
         ids: &[FrameId; FRAME_STACK],

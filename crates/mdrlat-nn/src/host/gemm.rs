@@ -241,14 +241,15 @@ pub(crate) fn gemm_short_by_long(
 /// conv2/conv3 backward on one Zen 4 core 1.5–1.7 → 0.9–1.1 ms). On CPUs with
 /// AVX-512 the short-by-long kernel, reading `a` in place (row-major or transposed, the
 /// latter from L2: its rows alias in L1) and `b` in one block of depth when it is small,
-/// so that each register tile streams its rows of `a` once, in order, and fetching each
-/// next tile's rows of `c` for writing while a tile is summed (the output is fresh memory:
-/// without that, the stores wait on memory); elsewhere the `gemm` crate. Each element is
+/// so that each register tile streams its rows of `a` once, in order, and, strip by strip,
+/// fetching each next tile's rows of `c` for writing while a tile is summed (the output is
+/// fresh memory: without that, the stores wait on memory); elsewhere the `gemm` crate. Each element is
 /// summed by one thread in one order. One AMD EPYC Zen 4 core, side by side with the
 /// `gemm` crate: `xᵀ · dy` for 32 × 4096 × 512 55–76 → 76–82 GFLOP/s, `W · dyᵀ` with the
-/// weight out of cache 71–72 → 76–82. The weight gradients (`xᵀ · dy`: one block of depth,
-/// several strips) go row band by row band with each band of `xᵀ` packed and no hand-made
-/// fetches of `c`: on a Sapphire Rapids Xeon (criterion, 2026-12-04) 90 → 104–110 GFLOP/s
+/// weight out of cache 71–72 → 76–82. With one small block of depth and several strips
+/// (the weight gradients `xᵀ · dy`, the convolutions' patch gradients `dy · W`) the tiles go
+/// row band by row band, a transposed `a` packed band by band, with no hand-made fetches of
+/// `c` (the band is one sequential stream): on a Sapphire Rapids Xeon (criterion, 2026-12-04) 90 → 104–110 GFLOP/s
 /// on one core, 172 → 204–217 on two; NumPy's OpenBLAS 0.3.31 ran the same product at 121
 /// and 256 there.
 ///
@@ -646,13 +647,14 @@ mod avx512 {
             } else {
                 Ahead::none()
             };
-            // One block of depth and several strips (the weight gradients `xᵀ · dy`: `b`, the
-            // batch's output gradients, fits in L2): row band by row band, every strip of a
-            // band before the next, so that `c` is written as one sequential stream (a band of
-            // 8 rows is 8 whole rows), which the L2 streamer fetches ahead for writing; strip
-            // by strip, each tile wrote 8 pieces of 192 bytes 2 KB apart. Each element is
-            // still summed by one tile in the same order: the same bits.
-            if wide && kk == k && n > strip {
+            // The whole depth in one block with a small `b` (at most 16,384 values: it stays
+            // in L2) and several strips — the linear layers' weight gradients `xᵀ · dy` and the
+            // convolutions' patch gradients `dy · W`, both of depth 32: row band by row band,
+            // every strip of a band before the next, so that `c` is written as one sequential
+            // stream (a band of 8 rows is 8 whole rows), which the L2 streamer fetches ahead
+            // for writing; strip by strip, each tile wrote 8 pieces of 192 bytes 2 KB apart.
+            // Each element is still summed by one tile in the same order: the same bits.
+            if wide && pc == 0 && kk == k && k * n <= 1 << 14 && n > strip {
                 // A transposed `a` (`xᵀ`: a band's values of one depth step side by side, the
                 // depth steps a whole row of `x` apart, all in one L1 set) is packed band by
                 // band, `[depth][rows]`, so that every strip reads it from L1.
@@ -693,7 +695,7 @@ mod avx512 {
                             prefetch: Some(b.wrapping_add(pc * ldb + b_next)),
                             c_next: None,
                         };
-                        unsafe { run_tile(vectors, rows, &t, &mut ahead) };
+                        unsafe { run_tile(vectors, rows, &t, &mut Ahead::none()) };
                         jc += strip;
                     }
                     ic += rows;
@@ -1472,7 +1474,7 @@ mod tests {
             // Row band by row band (one block of depth, several strips), with tails.
             (45, 100, 24, false, false),
             (45, 100, 24, true, false),
-            (13, 200, 7, true, true),
+            (21, 200, 7, true, true),
         ] {
             let a: Vec<f32> = (0..m * k).map(|v| ((v * 7) % 13) as f32 * 0.25 - 1.5).collect();
             let b: Vec<f32> = (0..k * n).map(|v| ((v * 5) % 11) as f32 * 0.125 - 0.6).collect();
