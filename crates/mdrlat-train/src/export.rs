@@ -248,5 +248,12 @@ fn canonical_header(path: &Path) -> Result<(), String> {
     out.extend_from_slice(&(text.len() as u64).to_le_bytes());
     out.extend_from_slice(text.as_bytes());
     out.extend_from_slice(&bytes[end..]);
-    std::fs::write(path, out).map_err(|e| err(e.to_string()))
+    // Written beside the file and renamed over it: a crash leaves the whole old file or the
+    // whole new one, never a truncated model, and the model gets the process's default
+    // permissions like every other file of a run (burn's store creates it owner-only).
+    let name = path.file_name().map_or_else(|| "model".into(), |n| n.to_string_lossy());
+    let tmp = path.with_file_name(format!(".{name}.tmp"));
+    std::fs::write(&tmp, out).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path)
+        .map_err(|e| err(format!("replacing it with {}: {e}", tmp.display())))
 }

@@ -106,6 +106,23 @@ fn a_model_stored_in_f16_loads_back_and_decides_alike() {
             std::fs::metadata(&f16_path).expect("f16").len(),
         );
         assert!(s16 * 2 < s32 + 4096, "f16 halves the file: {s16} vs {s32}");
+        // The model file has the permissions of any new file (others may read a model on a
+        // shared machine), and no temporary file is left beside it.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let plain = dir.join("plain");
+            std::fs::write(&plain, b"x").expect("plain");
+            let mode = |p: &std::path::Path| {
+                std::fs::metadata(p).expect("metadata").permissions().mode() & 0o777
+            };
+            assert_eq!(mode(&f32_path), mode(&plain), "model.safetensors permissions");
+            let names: Vec<String> = std::fs::read_dir(&dir)
+                .expect("dir")
+                .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+                .collect();
+            assert!(names.iter().all(|n| !n.ends_with(".tmp")), "left behind: {names:?}");
+        }
         // f32 round trip: the same Q-values exactly.
         let same = GreedyPolicy::load(&f32_path, &device, 1).expect("load f32");
         let d = compare_q(&original, &same, &observations).expect("compare");
