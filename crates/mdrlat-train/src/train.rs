@@ -162,6 +162,9 @@ impl Csv {
             File::create(&path).map_err(|source| TrainError::Io { path: path.clone(), source })?;
         let mut csv = Csv { path, out: BufWriter::new(file) };
         csv.line(header)?;
+        // The header on disk at once: a run stopped before its first rows leaves a readable
+        // (empty) table, not an empty file.
+        csv.flush()?;
         Ok(csv)
     }
     fn line(&mut self, text: &str) -> Result<(), TrainError> {
@@ -495,6 +498,18 @@ pub fn train(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_new_csv_has_its_header_on_disk_before_any_row() {
+        let dir = std::env::temp_dir().join(format!("mdrlat-csv-header-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("eval.csv");
+        let csv = Csv::create(path.clone(), EVAL_HEADER).expect("create");
+        // Read while the writer is still open, as after a run killed before its first rows.
+        assert_eq!(std::fs::read_to_string(&path).expect("read"), format!("{EVAL_HEADER}\n"));
+        drop(csv);
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     #[test]
     fn resuming_a_run_of_an_older_version_widens_its_csv_to_the_new_header() {
