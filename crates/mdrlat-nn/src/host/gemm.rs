@@ -243,15 +243,15 @@ pub(crate) fn gemm_short_by_long(
 /// latter from L2: its rows alias in L1) and `b` in one block of depth when it is small,
 /// so that each register tile streams its rows of `a` once, in order, and, strip by strip,
 /// fetching each next tile's rows of `c` for writing while a tile is summed (the output is
-/// fresh memory: without that, the stores wait on memory); elsewhere the `gemm` crate. Each element is
-/// summed by one thread in one order. One AMD EPYC Zen 4 core, side by side with the
+/// fresh memory: without that, the stores wait on memory); elsewhere the `gemm` crate.
+/// Each element is summed by one thread in one order. One AMD EPYC Zen 4 core, side by side with the
 /// `gemm` crate: `xᵀ · dy` for 32 × 4096 × 512 55–76 → 76–82 GFLOP/s, `W · dyᵀ` with the
 /// weight out of cache 71–72 → 76–82. With one small block of depth and several strips
 /// (the weight gradients `xᵀ · dy`, the convolutions' patch gradients `dy · W`) the tiles go
 /// row band by row band, a transposed `a` packed band by band, with no hand-made fetches of
-/// `c` (the band is one sequential stream): on a Sapphire Rapids Xeon (criterion, 2026-12-04) 90 → 104–110 GFLOP/s
-/// on one core, 172 → 204–217 on two; NumPy's OpenBLAS 0.3.31 ran the same product at 121
-/// and 256 there.
+/// `c` (the band is one sequential stream): on a Sapphire Rapids Xeon (criterion,
+/// 2026-12-04) 90 → 104–110 GFLOP/s on one core, 172 → 204–217 on two; NumPy's OpenBLAS
+/// 0.3.31 ran the same product at 121 and 256 there.
 ///
 /// # Panics
 /// If a slice is shorter than its matrix.
