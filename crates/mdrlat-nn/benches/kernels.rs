@@ -32,7 +32,12 @@ fn values(len: usize, seed: usize) -> Vec<f32> {
 
 /// Enough copies of a `din × dout` weight to fill 128 MB (at least one).
 fn weights(din: usize, dout: usize) -> Vec<Vec<f32>> {
-    let copies = ((128 << 20) / (din * dout * 4)).max(1);
+    weights_filling(din, dout, 128)
+}
+
+/// Enough copies of a `din × dout` weight to fill `mb` MB (at least one).
+fn weights_filling(din: usize, dout: usize, mb: usize) -> Vec<Vec<f32>> {
+    let copies = ((mb << 20) / (din * dout * 4)).max(1);
     (0..copies).map(|s| values(din * dout, s)).collect()
 }
 
@@ -78,6 +83,55 @@ fn forward(c: &mut Criterion) {
     g.finish();
 }
 
+/// One decision's products (batch 1): the fusion's dense 8192 → 512 layer and a head's
+/// 4096 → 512 on a representation of which a share is zero (a ReLU's output), on one
+/// thread: mdrlat's kernel (reads only the rows a non-zero input needs) beside the `gemm`
+/// crate's vector-matrix path (reads every row). The weights are read in turn from 36 MB,
+/// the size of MDRLAT's (`l3`: they stay in a large last-level cache between decisions,
+/// as a robot's repeated decisions keep them) or from 128 MB (`mem`).
+fn vector_matrix(c: &mut Criterion) {
+    let mut g = c.benchmark_group("vector_matrix_bytes");
+    let pool = pool(1);
+    for (din, dout, zero_share, mb) in [
+        (8192, 512, 0.0, 36),
+        (8192, 512, 0.0, 128),
+        (4096, 512, 0.0, 36),
+        (4096, 512, 0.6, 36),
+        (4096, 512, 0.6, 128),
+    ] {
+        let mut x = values(din, 3);
+        // Every row whose index falls in the zero share of each 10: ~`zero_share` zeros.
+        for (i, v) in x.iter_mut().enumerate() {
+            if ((i * 7) % 10) < (zero_share * 10.0) as usize {
+                *v = 0.0;
+            }
+        }
+        let ws = weights_filling(din, dout, mb);
+        let mut y = vec![0.0f32; dout];
+        g.throughput(Throughput::Bytes((din * dout * 4) as u64));
+        let temp = if mb < 64 { "l3" } else { "mem" };
+        let id = format!("{din}->{dout}/zeros{zero_share}/{temp}");
+        let mut i = 0;
+        g.bench_function(BenchmarkId::new("host", &id), |b| {
+            b.iter(|| {
+                i += 1;
+                let w = &ws[i % ws.len()];
+                pool.install(|| products::forward(1, din, dout, &x, w, &mut y));
+                black_box(y[0]);
+            })
+        });
+        g.bench_function(BenchmarkId::new("gemm_crate", &id), |b| {
+            b.iter(|| {
+                i += 1;
+                let w = &ws[i % ws.len()];
+                pool.install(|| products::forward_gemm_crate(1, din, dout, &x, w, &mut y));
+                black_box(y[0]);
+            })
+        });
+    }
+    g.finish();
+}
+
 fn backward(c: &mut Criterion) {
     let mut g = c.benchmark_group("linear_backward_flops");
     let (batch, din, dout) = (32, 4096, 512);
@@ -108,7 +162,7 @@ fn backward(c: &mut Criterion) {
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(20);
-    targets = forward, backward
+    targets = forward, vector_matrix, backward
 }
 fn main() {
     keep_freed_memory();

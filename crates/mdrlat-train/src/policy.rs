@@ -26,8 +26,9 @@ pub struct GreedyPolicy {
     forward_batch: Option<usize>,
     /// One input buffer per forward of a batch.
     inputs: Vec<Inputs>,
-    /// The network prepared once for the CPU kernels with bfloat16 weights (opt-in).
-    bf16: Option<mdrlat_nn::host::HostNet>,
+    /// The network prepared once for the CPU's host kernels (on `flex`; `None` elsewhere),
+    /// its linear layers' weights in bfloat16 with [`GreedyPolicy::with_bf16_weights`].
+    host: Option<mdrlat_nn::host::HostNet>,
 }
 
 impl std::fmt::Debug for GreedyPolicy {
@@ -204,6 +205,7 @@ impl GreedyPolicy {
         threads: usize,
         source: String,
     ) -> Result<Self, String> {
+        let host = net.host(&config);
         Ok(Self {
             config,
             net,
@@ -212,7 +214,7 @@ impl GreedyPolicy {
             source,
             forward_batch: None,
             inputs: Vec::new(),
-            bf16: None,
+            host,
         })
     }
 
@@ -242,11 +244,9 @@ impl GreedyPolicy {
     /// # Errors
     /// The CPU lacks the kernel (AVX-512F), or the backend is not the CPU's.
     pub fn with_bf16_weights(mut self) -> Result<Self, String> {
-        let host = self
-            .net
-            .host(&self.config)
-            .ok_or("bfloat16 weights need the cpu device (the host kernels)")?;
-        self.bf16 =
+        let host =
+            self.host.take().ok_or("bfloat16 weights need the cpu device (the host kernels)")?;
+        self.host =
             Some(host.with_bf16_weights().ok_or(
                 "bfloat16 weights need AVX-512F, which this CPU lacks (run without --bf16)",
             )?);
@@ -300,7 +300,7 @@ impl GreedyPolicy {
     /// # Errors
     /// Inputs of the wrong size, or a backend failure.
     pub fn q_values(&self, inputs: &Inputs) -> Result<Vec<f32>, PolicyError> {
-        let host = self.bf16.as_ref();
+        let host = self.host.as_ref();
         self.pool.install(|| q_forward_with(&self.net, host, &self.config, &self.device, inputs))
     }
 }
@@ -332,7 +332,7 @@ impl Policy for GreedyPolicy {
             self.inputs.resize_with(chunks.len(), Inputs::default);
         }
         let (net, config, device) = (&self.net, &self.config, &self.device);
-        let host = self.bf16.as_ref();
+        let host = self.host.as_ref();
         let inputs = &mut self.inputs[..chunks.len()];
         let forward = || -> Result<Vec<Vec<f32>>, PolicyError> {
             self.pool.install(|| {

@@ -147,8 +147,8 @@ unsafe fn product(
     }
 }
 
-/// Rows of `a` for which [`gemm_short_by_long`] uses its own kernel: from one or two rows
-/// (a single decision) the `gemm` crate's vector-matrix path is faster.
+/// Rows of `a` for which [`gemm_short_by_long`] uses its short-by-long kernel: one row (a
+/// single decision) has a kernel of its own, and for two the `gemm` crate is faster.
 const SHORT_MIN_ROWS: usize = 3;
 const SHORT_ROWS: usize = 128;
 
@@ -176,6 +176,23 @@ pub(crate) fn gemm_short_by_long(
     assert!(a.len() >= m * k, "gemm: lhs has {} values, needs {m}x{k}", a.len());
     assert!(b.len() >= k * n, "gemm: rhs has {} values, needs {k}x{n}", b.len());
     assert!(c.len() >= m * n, "gemm: output has {} values, needs {m}x{n}", c.len());
+    #[cfg(target_arch = "x86_64")]
+    if m == 1 && n.is_multiple_of(16) && n > 0 && k > 2 && avx512::available() {
+        // A single decision: the weight is read from memory once, and only its rows the
+        // input does not zero (a ReLU zeroes about half of a representation). The sums are
+        // the `gemm` crate's, whose vector-matrix path this replaces (from a depth of 3:
+        // below, that crate multiplies and adds apart).
+        if !accumulate {
+            c[..n].fill(0.0);
+        }
+        let mut rows = Vec::with_capacity(k);
+        // SAFETY: `a` holds `k` values, `b` `k × n`, `c` `n` (asserted above); `n` is a
+        // multiple of 16.
+        unsafe {
+            avx512::vec_mat_nonzero(k, n, a.as_ptr(), b.as_ptr(), n, c.as_mut_ptr(), &mut rows)
+        };
+        return;
+    }
     #[cfg(target_arch = "x86_64")]
     if m >= SHORT_MIN_ROWS && (m <= SHORT_ROWS || n <= 16) && n > 0 && k > 0 && avx512::available()
     {
@@ -601,6 +618,88 @@ mod avx512 {
                     _mm512_mask_storeu_ps(y.add(j), lo, acc_lo);
                     _mm512_mask_storeu_ps(y.add(j + 16), hi, acc_hi);
                     w = w.add(64);
+                }
+            }
+        }
+    }
+
+    /// `y (n) += x (k) · w (k × n, row stride ldw)` reading only the rows of `w` whose
+    /// value of `x` is not zero, four rows at a time: each element of `y` is summed in the
+    /// order of the rows, one fused multiply-add a row, as the `gemm` crate's vector-matrix
+    /// path sums it (that path also adds the zero rows' `0 · w`, which changes no sum but
+    /// the sign of an exact zero). `rows` is scratch for the rows read. Each group's weight
+    /// rows are fetched while the group two before it is summed: the rows a ReLU leaves are
+    /// scattered, 2 KB streams each, too short for the hardware prefetchers to follow.
+    ///
+    /// # Safety
+    /// AVX-512F must be available; `n` must be a multiple of 16; `x` must hold `k` floats,
+    /// `y` `n`, and `w` `k` rows of `n` floats `ldw` apart.
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn vec_mat_nonzero(
+        k: usize,
+        n: usize,
+        x: *const f32,
+        w: *const f32,
+        ldw: usize,
+        y: *mut f32,
+        rows: &mut Vec<usize>,
+    ) {
+        debug_assert!(n.is_multiple_of(16));
+        // Groups between the one summed and the one fetched (1 and 2 measured the same).
+        const AHEAD: usize = 2;
+        rows.clear();
+        // The non-zero inputs, 16 at a time (NaN counts as non-zero: it must reach `y`).
+        for at in (0..k).step_by(16) {
+            // SAFETY: the mask keeps the load within the `k` floats of `x`.
+            let v = unsafe { _mm512_maskz_loadu_ps(mask(k - at), x.add(at)) };
+            let mut bits = _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(v, _mm512_setzero_ps());
+            while bits != 0 {
+                rows.push(at + bits.trailing_zeros() as usize);
+                bits &= bits - 1;
+            }
+        }
+        let vectors = n / 16;
+        let row = |i: usize| unsafe { w.add(i * ldw) };
+        let groups = rows.chunks(4);
+        let count = groups.len();
+        for (g, group) in groups.enumerate() {
+            let next: &[usize] = if g + AHEAD < count { &rows[(g + AHEAD) * 4..] } else { &[] };
+            let next = &next[..next.len().min(4)];
+            // SAFETY (this block): every row index is below `k`, every column below `n`.
+            unsafe {
+                if let &[r0, r1, r2, r3] = group {
+                    let (x0, x1, x2, x3) = (
+                        _mm512_set1_ps(*x.add(r0)),
+                        _mm512_set1_ps(*x.add(r1)),
+                        _mm512_set1_ps(*x.add(r2)),
+                        _mm512_set1_ps(*x.add(r3)),
+                    );
+                    let (w0, w1, w2, w3) = (row(r0), row(r1), row(r2), row(r3));
+                    for v in 0..vectors {
+                        let j = v * 16;
+                        // One line of each next row: a row of n floats is n / 16 lines.
+                        for &r in next {
+                            _mm_prefetch::<_MM_HINT_T0>(row(r).add(j).cast());
+                        }
+                        let mut acc = _mm512_loadu_ps(y.add(j));
+                        acc = _mm512_fmadd_ps(_mm512_loadu_ps(w0.add(j)), x0, acc);
+                        acc = _mm512_fmadd_ps(_mm512_loadu_ps(w1.add(j)), x1, acc);
+                        acc = _mm512_fmadd_ps(_mm512_loadu_ps(w2.add(j)), x2, acc);
+                        acc = _mm512_fmadd_ps(_mm512_loadu_ps(w3.add(j)), x3, acc);
+                        _mm512_storeu_ps(y.add(j), acc);
+                    }
+                } else {
+                    for &r in group {
+                        let (xr, wr) = (_mm512_set1_ps(*x.add(r)), row(r));
+                        for v in 0..vectors {
+                            let j = v * 16;
+                            let acc = _mm512_loadu_ps(y.add(j));
+                            _mm512_storeu_ps(
+                                y.add(j),
+                                _mm512_fmadd_ps(_mm512_loadu_ps(wr.add(j)), xr, acc),
+                            );
+                        }
+                    }
                 }
             }
         }
@@ -1454,6 +1553,35 @@ mod tests {
             let mut single = vec![0.0f32; m * n];
             one.install(|| gemm_short_by_long(m, n, k, &a, &b, &mut single, false));
             assert_eq!(split, single);
+        }
+    }
+
+    /// One row (a single decision): the kernel that reads only the rows of non-zero
+    /// inputs gives the `gemm` crate's vector-matrix sums exactly (up to the sign of an exact
+    /// zero), with a ReLU's share of zeros, none, or all, over and beside a group of four.
+    #[test]
+    fn one_row_skips_zero_inputs_and_keeps_the_sums() {
+        let same = |got: &[f32], want: &[f32]| {
+            got.iter().zip(want).all(|(x, y)| x == y || (x.is_nan() && y.is_nan()))
+        };
+        for (n, k) in [(16, 1), (16, 2), (16, 3), (64, 1024), (128, 2560), (512, 4097), (512, 8192)]
+        {
+            for zero_every in [0, 2, 3, 1] {
+                let a: Vec<f32> = (0..k)
+                    .map(|p| {
+                        let v = ((p * 7) % 13) as f32 * 0.37 - 2.1;
+                        if zero_every > 0 && (p * 5) % 7 < 7 / zero_every { 0.0 } else { v }
+                    })
+                    .collect();
+                let b: Vec<f32> = (0..k * n).map(|v| ((v * 5) % 11) as f32 * 0.113 - 0.6).collect();
+                for accumulate in [false, true] {
+                    let start: Vec<f32> = (0..n).map(|j| j as f32 * 0.01 - 0.07).collect();
+                    let (mut got, mut want) = (start.clone(), start);
+                    gemm_short_by_long(1, n, k, &a, &b, &mut got, accumulate);
+                    gemm(1, n, k, Mat::n(&a), Mat::n(&b), &mut want, accumulate);
+                    assert!(same(&got, &want), "1x{n}x{k}, zeros 1/{zero_every}, {accumulate}");
+                }
+            }
         }
     }
 

@@ -220,6 +220,12 @@ struct HostConv {
     weight: HostTensor,
     bias: HostTensor,
     geometry: ConvGeometry,
+    /// The weight in the layouts the kernels read, made at first use and kept while the
+    /// network is (a `HostNet` holds its weights' storage, so they cannot change under it):
+    /// `[out, kh, kw, in]`, the patches' order (`ConvGeometry::permute_weight`), and, for the
+    /// first depth convolution, `Wᵀ` (`[in·kh·kw, out]`).
+    patch_order: std::sync::OnceLock<Vec<f32>>,
+    transposed: std::sync::OnceLock<Vec<f32>>,
 }
 
 impl HostConv {
@@ -253,7 +259,33 @@ impl HostConv {
     ) -> Option<Self> {
         let (weight, bias) = (HostTensor::new(weight)?, HostTensor::new(bias?)?);
         let expected = geometry.out_channels * geometry.patch_len();
-        (weight.data().len() == expected).then_some(Self { weight, bias, geometry })
+        (weight.data().len() == expected).then_some(Self {
+            weight,
+            bias,
+            geometry,
+            patch_order: std::sync::OnceLock::new(),
+            transposed: std::sync::OnceLock::new(),
+        })
+    }
+
+    /// The weight in the patches' order, `[out, kh, kw, in]`.
+    fn patch_weight(&self) -> &[f32] {
+        self.patch_order.get_or_init(|| self.geometry.permute_weight(self.weight.data()))
+    }
+
+    /// `Wᵀ`, `[in·kh·kw, out]`: each patch value's weight for every filter, side by side.
+    fn transposed_weight(&self) -> &[f32] {
+        self.transposed.get_or_init(|| {
+            let (w, filters) = (self.weight.data(), self.geometry.out_channels);
+            let k = w.len() / filters.max(1);
+            let mut wt = vec![0.0; w.len()];
+            for (o, row) in w.chunks_exact(k.max(1)).enumerate() {
+                for (j, &v) in row.iter().enumerate() {
+                    wt[j * filters + o] = v;
+                }
+            }
+            wt
+        })
     }
 }
 
@@ -593,14 +625,8 @@ impl HostNet {
     fn depth_conv1(&self, c1: &HostConv, images: &[&[f32]]) -> Vec<f32> {
         let g = Self::conv1_geometry(c1);
         let (positions, filters, k) = (g.positions(), c1.geometry.out_channels, g.patch_len());
-        let (w, bias) = (c1.weight.data(), c1.bias.data());
         // Wᵀ, [560, 16]: each patch value's weight for the 16 filters, one vector.
-        let mut wt = vec![0.0; w.len()];
-        for (o, row) in w.chunks_exact(k).enumerate() {
-            for (j, &v) in row.iter().enumerate() {
-                wt[j * filters + o] = v;
-            }
-        }
+        let (wt, bias) = (c1.transposed_weight(), c1.bias.data());
         let mut out = bias.repeat(images.len() * positions);
         // Straight from each zero-padded image where the CPU has AVX-512 and there are 16
         // filters; else from its patches.
@@ -610,10 +636,10 @@ impl HostNet {
             |(padded, patches), (out, image)| {
                 let done = filters == 16
                     && Self::pad_conv1_image(&g, &direct, image, padded)
-                    && conv16(&direct, padded, &wt, out);
+                    && conv16(&direct, padded, wt, out);
                 if !done {
                     g.extract(image, 1, patches);
-                    gemm_short_by_long(positions, filters, k, patches, &wt, out, true);
+                    gemm_short_by_long(positions, filters, k, patches, wt, out, true);
                 }
                 relu_in_place(out);
             },
@@ -781,8 +807,7 @@ impl HostNet {
     ) -> Vec<f32> {
         let g = layer.geometry;
         g.im2col(x, batch, cols);
-        let w = g.permute_weight(layer.weight.data());
-        patch_product_relu(cols, &w, layer.bias.data(), batch * g.positions())
+        patch_product_relu(cols, layer.patch_weight(), layer.bias.data(), batch * g.positions())
     }
 
     /// The backward pass of `tape` for the loss gradients `dq` (`[R, actions]`) and, with the
@@ -1079,8 +1104,8 @@ impl HostNet {
         dcols: Option<&mut Vec<f32>>,
     ) -> (Vec<f32>, Vec<f32>) {
         let g = layer.geometry;
-        let w = g.permute_weight(layer.weight.data());
-        let (dw, db) = patch_product_backward(cols, &w, dy, batch * g.positions(), dcols);
+        let (dw, db) =
+            patch_product_backward(cols, layer.patch_weight(), dy, batch * g.positions(), dcols);
         (g.unpermute_weight(&dw), db)
     }
 }
