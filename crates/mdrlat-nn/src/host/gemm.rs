@@ -1272,13 +1272,23 @@ mod avx512 {
                 let n = [16, 8, 4, 2, 1].into_iter().find(|&r| r <= g.out_cols - x).unwrap_or(1);
                 let base = unsafe { img.add(y * g.stride * g.cols + x * g.stride) };
                 let o = unsafe { out.add((y * g.out_cols + x) * 16) };
+                // The paper's stride (8) as a constant: each tile's pixels are then fixed
+                // offsets from one pointer, where a stride known only at run time made the
+                // compiler step a pointer from pixel to pixel (16 dependent adds a kernel
+                // column). Same sums; depth-only steps 15.0–15.2 → 14.1–14.7 ms in
+                // alternating pairs on a Sapphire Rapids Xeon.
                 unsafe {
-                    match n {
-                        16 => conv16_tile::<16>(g, base, wt, o),
-                        8 => conv16_tile::<8>(g, base, wt, o),
-                        4 => conv16_tile::<4>(g, base, wt, o),
-                        2 => conv16_tile::<2>(g, base, wt, o),
-                        _ => conv16_tile::<1>(g, base, wt, o),
+                    match (n, g.stride) {
+                        (16, 8) => conv16_tile::<16, 8>(g, base, wt, o),
+                        (8, 8) => conv16_tile::<8, 8>(g, base, wt, o),
+                        (4, 8) => conv16_tile::<4, 8>(g, base, wt, o),
+                        (2, 8) => conv16_tile::<2, 8>(g, base, wt, o),
+                        (1, 8) => conv16_tile::<1, 8>(g, base, wt, o),
+                        (16, _) => conv16_tile::<16, 0>(g, base, wt, o),
+                        (8, _) => conv16_tile::<8, 0>(g, base, wt, o),
+                        (4, _) => conv16_tile::<4, 0>(g, base, wt, o),
+                        (2, _) => conv16_tile::<2, 0>(g, base, wt, o),
+                        _ => conv16_tile::<1, 0>(g, base, wt, o),
                     }
                 }
                 x += n;
@@ -1359,14 +1369,16 @@ mod avx512 {
         }
     }
 
-    /// `R` consecutive output positions of one output row.
+    /// `R` consecutive output positions of one output row, at stride `S` (0: the
+    /// geometry's, known at run time).
     #[target_feature(enable = "avx512f")]
-    unsafe fn conv16_tile<const R: usize>(
+    unsafe fn conv16_tile<const R: usize, const S: usize>(
         g: &super::Conv16,
         base: *const f32,
         wt: *const f32,
         out: *mut f32,
     ) {
+        let stride = if S == 0 { g.stride } else { S };
         let mut acc = [_mm512_setzero_ps(); R];
         for ch in 0..g.channels {
             for ky in 0..g.kh {
@@ -1375,7 +1387,7 @@ mod avx512 {
                 for kx in 0..g.kw {
                     let wv = unsafe { _mm512_loadu_ps(w.add(kx * 16)) };
                     for (r, acc) in acc.iter_mut().enumerate() {
-                        let x = _mm512_set1_ps(unsafe { *row.add(r * g.stride + kx) });
+                        let x = _mm512_set1_ps(unsafe { *row.add(r * stride + kx) });
                         *acc = _mm512_fmadd_ps(x, wv, *acc);
                     }
                 }
@@ -1625,6 +1637,49 @@ mod tests {
                 "{m}x{n}x{k}"
             );
             assert_eq!(single, split, "{m}x{n}x{k} on two threads");
+        }
+    }
+
+    /// The direct first-layer convolution against its definition, at the paper's stride
+    /// (its constant-stride tiles) and at others, with every tile width (16 to 1) in a row.
+    #[test]
+    fn conv16_matches_the_definition() {
+        for (channels, kh, kw, stride, out_rows, out_cols) in
+            [(4, 10, 14, 8, 2, 31), (2, 3, 5, 2, 3, 23), (1, 2, 19, 3, 2, 7)]
+        {
+            let rows = (out_rows - 1) * stride + kh;
+            let cols = (out_cols - 1) * stride + kw;
+            let g = Conv16 { channels, rows, cols, kh, kw, stride, out_rows, out_cols };
+            let img: Vec<f32> =
+                (0..channels * rows * cols).map(|v| ((v * 7) % 13) as f32 * 0.25 - 1.5).collect();
+            let wt: Vec<f32> =
+                (0..channels * kh * kw * 16).map(|v| ((v * 5) % 11) as f32 * 0.125 - 0.6).collect();
+            let mut want = vec![0.5f32; out_rows * out_cols * 16];
+            for y in 0..out_rows {
+                for x in 0..out_cols {
+                    for f in 0..16 {
+                        let mut sum = 0.0f64;
+                        for ch in 0..channels {
+                            for ky in 0..kh {
+                                for kx in 0..kw {
+                                    let px =
+                                        img[(ch * rows + y * stride + ky) * cols + x * stride + kx];
+                                    sum +=
+                                        px as f64 * wt[((ch * kh + ky) * kw + kx) * 16 + f] as f64;
+                                }
+                            }
+                        }
+                        want[(y * out_cols + x) * 16 + f] += sum as f32;
+                    }
+                }
+            }
+            let mut got = vec![0.5f32; want.len()];
+            if conv16(&g, &img, &wt, &mut got) {
+                assert!(
+                    got.iter().zip(&want).all(|(x, y)| (x - y).abs() <= 1e-4 * y.abs().max(1.0)),
+                    "{channels}x{kh}x{kw}/{stride}"
+                );
+            }
         }
     }
 
