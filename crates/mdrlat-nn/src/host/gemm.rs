@@ -1640,45 +1640,85 @@ mod tests {
         }
     }
 
+    /// A [`Conv16`] geometry (`channels, kh, kw, stride, out_rows, out_cols`) and an image
+    /// for it, for the direct convolution's tests.
+    struct ConvCase {
+        g: Conv16,
+        img: Vec<f32>,
+    }
+
+    impl ConvCase {
+        fn new(
+            (channels, kh, kw, stride, out_rows, out_cols): (
+                usize,
+                usize,
+                usize,
+                usize,
+                usize,
+                usize,
+            ),
+        ) -> Self {
+            let rows = (out_rows - 1) * stride + kh;
+            let cols = (out_cols - 1) * stride + kw;
+            let g = Conv16 { channels, rows, cols, kh, kw, stride, out_rows, out_cols };
+            let img =
+                (0..channels * rows * cols).map(|v| ((v * 7) % 13) as f32 * 0.25 - 1.5).collect();
+            Self { g, img }
+        }
+
+        /// The pixel kernel value `(ch, ky, kx)` meets at output position `(y, x)`.
+        fn px(&self, ch: usize, ky: usize, kx: usize, y: usize, x: usize) -> f64 {
+            let g = &self.g;
+            self.img[(ch * g.rows + y * g.stride + ky) * g.cols + x * g.stride + kx] as f64
+        }
+
+        /// `len` values for the other operand (weights or output gradients).
+        fn values(len: usize) -> Vec<f32> {
+            (0..len).map(|v| ((v * 5) % 11) as f32 * 0.125 - 0.6).collect()
+        }
+
+        /// `got` against `want` (added to 0.5 by both), to 1e-4 relative.
+        fn check(&self, got: &[f32], want: &[f32]) {
+            let g = &self.g;
+            assert!(
+                got.iter().zip(want).all(|(x, y)| (x - y).abs() <= 1e-4 * y.abs().max(1.0)),
+                "{}x{}x{}/{}",
+                g.channels,
+                g.kh,
+                g.kw,
+                g.stride
+            );
+        }
+    }
+
     /// The direct first-layer convolution against its definition, at the paper's stride
     /// (its constant-stride tiles) and at others, with every tile width (16 to 1) in a row.
     #[test]
     fn conv16_matches_the_definition() {
-        for (channels, kh, kw, stride, out_rows, out_cols) in
-            [(4, 10, 14, 8, 2, 31), (2, 3, 5, 2, 3, 23), (1, 2, 19, 3, 2, 7)]
-        {
-            let rows = (out_rows - 1) * stride + kh;
-            let cols = (out_cols - 1) * stride + kw;
-            let g = Conv16 { channels, rows, cols, kh, kw, stride, out_rows, out_cols };
-            let img: Vec<f32> =
-                (0..channels * rows * cols).map(|v| ((v * 7) % 13) as f32 * 0.25 - 1.5).collect();
-            let wt: Vec<f32> =
-                (0..channels * kh * kw * 16).map(|v| ((v * 5) % 11) as f32 * 0.125 - 0.6).collect();
-            let mut want = vec![0.5f32; out_rows * out_cols * 16];
-            for y in 0..out_rows {
-                for x in 0..out_cols {
+        for shape in [(4, 10, 14, 8, 2, 31), (2, 3, 5, 2, 3, 23), (1, 2, 19, 3, 2, 7)] {
+            let c = ConvCase::new(shape);
+            let g = c.g;
+            let wt = ConvCase::values(g.channels * g.kh * g.kw * 16);
+            let mut want = vec![0.5f32; g.out_rows * g.out_cols * 16];
+            for y in 0..g.out_rows {
+                for x in 0..g.out_cols {
                     for f in 0..16 {
                         let mut sum = 0.0f64;
-                        for ch in 0..channels {
-                            for ky in 0..kh {
-                                for kx in 0..kw {
-                                    let px =
-                                        img[(ch * rows + y * stride + ky) * cols + x * stride + kx];
-                                    sum +=
-                                        px as f64 * wt[((ch * kh + ky) * kw + kx) * 16 + f] as f64;
+                        for ch in 0..g.channels {
+                            for ky in 0..g.kh {
+                                for kx in 0..g.kw {
+                                    let w = wt[((ch * g.kh + ky) * g.kw + kx) * 16 + f] as f64;
+                                    sum += c.px(ch, ky, kx, y, x) * w;
                                 }
                             }
                         }
-                        want[(y * out_cols + x) * 16 + f] += sum as f32;
+                        want[(y * g.out_cols + x) * 16 + f] += sum as f32;
                     }
                 }
             }
             let mut got = vec![0.5f32; want.len()];
-            if conv16(&g, &img, &wt, &mut got) {
-                assert!(
-                    got.iter().zip(&want).all(|(x, y)| (x - y).abs() <= 1e-4 * y.abs().max(1.0)),
-                    "{channels}x{kh}x{kw}/{stride}"
-                );
+            if conv16(&g, &c.img, &wt, &mut got) {
+                c.check(&got, &want);
             }
         }
     }
@@ -1687,41 +1727,30 @@ mod tests {
     /// kernels narrower and wider than one register row of 16.
     #[test]
     fn conv16_weight_grad_matches_the_definition() {
-        for (channels, kh, kw, stride, out_rows, out_cols) in
-            [(2, 3, 5, 2, 4, 3), (4, 10, 14, 8, 3, 4), (1, 2, 19, 3, 2, 2)]
-        {
-            let rows = (out_rows - 1) * stride + kh;
-            let cols = (out_cols - 1) * stride + kw;
-            let g = Conv16 { channels, rows, cols, kh, kw, stride, out_rows, out_cols };
-            let img: Vec<f32> =
-                (0..channels * rows * cols).map(|v| ((v * 7) % 13) as f32 * 0.25 - 1.5).collect();
-            let dy: Vec<f32> = (0..out_rows * out_cols * 16)
-                .map(|v| ((v * 5) % 11) as f32 * 0.125 - 0.6)
-                .collect();
-            let mut want = vec![0.5f32; channels * kh * kw * 16];
-            for ch in 0..channels {
-                for ky in 0..kh {
-                    for kx in 0..kw {
+        for shape in [(2, 3, 5, 2, 4, 3), (4, 10, 14, 8, 3, 4), (1, 2, 19, 3, 2, 2)] {
+            let c = ConvCase::new(shape);
+            let g = c.g;
+            let dy = ConvCase::values(g.out_rows * g.out_cols * 16);
+            let mut want = vec![0.5f32; g.channels * g.kh * g.kw * 16];
+            for ch in 0..g.channels {
+                for ky in 0..g.kh {
+                    for kx in 0..g.kw {
                         for f in 0..16 {
                             let mut sum = 0.0f64;
-                            for y in 0..out_rows {
-                                for x in 0..out_cols {
-                                    let px =
-                                        img[(ch * rows + y * stride + ky) * cols + x * stride + kx];
-                                    sum += px as f64 * dy[(y * out_cols + x) * 16 + f] as f64;
+                            for y in 0..g.out_rows {
+                                for x in 0..g.out_cols {
+                                    let d = dy[(y * g.out_cols + x) * 16 + f] as f64;
+                                    sum += c.px(ch, ky, kx, y, x) * d;
                                 }
                             }
-                            want[((ch * kh + ky) * kw + kx) * 16 + f] += sum as f32;
+                            want[((ch * g.kh + ky) * g.kw + kx) * 16 + f] += sum as f32;
                         }
                     }
                 }
             }
             let mut got = vec![0.5f32; want.len()];
-            if conv16_weight_grad(&g, &img, &dy, &mut got) {
-                assert!(
-                    got.iter().zip(&want).all(|(x, y)| (x - y).abs() <= 1e-4 * y.abs().max(1.0)),
-                    "{channels}x{kh}x{kw}/{stride}"
-                );
+            if conv16_weight_grad(&g, &c.img, &dy, &mut got) {
+                c.check(&got, &want);
             }
         }
     }
