@@ -626,8 +626,9 @@ mod avx512 {
     /// `y (n) += x (k) · w (k × n, row stride ldw)` reading only the rows of `w` whose
     /// value of `x` is not zero, four rows at a time: each element of `y` is summed in the
     /// order of the rows, one fused multiply-add a row, as the `gemm` crate's vector-matrix
-    /// path sums it (that path also adds the zero rows' `0 · w`, which changes no sum but
-    /// the sign of an exact zero). `rows` is scratch for the rows read. Each group's weight
+    /// path sums it (that path also adds the zero rows' `0 · w`, which for finite weights
+    /// changes no sum but the sign of an exact zero; a non-finite weight in a skipped row
+    /// no longer turns its outputs into NaN). `rows` is scratch for the rows read. Each group's weight
     /// rows are fetched while the group two before it is summed: the rows a ReLU leaves are
     /// scattered, 2 KB streams each, too short for the hardware prefetchers to follow.
     ///
