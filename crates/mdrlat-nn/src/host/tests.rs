@@ -67,18 +67,20 @@ fn values(t: Tensor<2>) -> Vec<f32> {
     t.into_data().try_to_vec::<f32>().expect("f32")
 }
 
+/// The forward pass against burn's, for a batch and for one row (a single decision, whose
+/// linear layers read only the weight rows of non-zero inputs).
 #[test]
 fn host_forward_matches_burn_for_every_variant() {
     let dev = Device::flex();
     for (i, &variant) in Variant::ALL.iter().enumerate() {
-        for goal_dim in [0, 3] {
-            let case = Case::new(variant, goal_dim, 3, 10 + i as u64);
+        for (goal_dim, batch) in [(0, 3), (3, 3), (0, 1), (3, 1)] {
+            let case = Case::new(variant, goal_dim, batch, 10 + i as u64);
             let net = case.config.init_seeded(&dev, 7 + i as u64);
             let host = net.host(&case.config).expect("flex weights are host memory");
             let tape = host.forward(&case.inputs(), true);
             let (q, vel) = case.burn_forward(&net, &dev);
             let err = relative_error(tape.q(), &values(q));
-            assert!(err < 1e-5, "{variant} goal {goal_dim}: Q relative error {err}");
+            assert!(err < 1e-5, "{variant} goal {goal_dim} batch {batch}: Q relative error {err}");
             match vel {
                 Some(vel) => {
                     let err = relative_error(tape.velocity(), &values(vel));
