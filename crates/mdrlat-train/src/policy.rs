@@ -205,7 +205,8 @@ impl GreedyPolicy {
         threads: usize,
         source: String,
     ) -> Result<Self, String> {
-        let host = net.host(&config);
+        // A one-thread policy runs a single decision's network on the calling thread.
+        let host = net.host(&config).map(|h| if threads <= 1 { h.on_calling_thread() } else { h });
         Ok(Self {
             config,
             net,
@@ -301,7 +302,15 @@ impl GreedyPolicy {
     /// Inputs of the wrong size, or a backend failure.
     pub fn q_values(&self, inputs: &Inputs) -> Result<Vec<f32>, PolicyError> {
         let host = self.host.as_ref();
-        self.pool.install(|| q_forward_with(&self.net, host, &self.config, &self.device, inputs))
+        let forward = || q_forward_with(&self.net, host, &self.config, &self.device, inputs);
+        if self.on_calling_thread(inputs.size) { forward() } else { self.pool.install(forward) }
+    }
+
+    /// Whether a forward of `rows` rows runs on the calling thread rather than in the
+    /// pool: one row, one thread, on the host kernels (see `HostNet::on_calling_thread`;
+    /// handing a decision to the pool's thread and waiting for it costs ~0.06 ms).
+    fn on_calling_thread(&self, rows: usize) -> bool {
+        rows == 1 && self.pool.current_num_threads() == 1 && self.host.is_some()
     }
 }
 
@@ -331,23 +340,24 @@ impl Policy for GreedyPolicy {
         if self.inputs.len() < chunks.len() {
             self.inputs.resize_with(chunks.len(), Inputs::default);
         }
+        let on_caller = self.on_calling_thread(rows);
         let (net, config, device) = (&self.net, &self.config, &self.device);
         let host = self.host.as_ref();
         let inputs = &mut self.inputs[..chunks.len()];
+        let one = |(chunk, inputs): (&&[&Observation], &mut Inputs)| {
+            observation_inputs(chunk, config, inputs)?;
+            pad_rows(inputs, rows);
+            let mut q = q_forward_with(net, host, config, device, inputs)?;
+            q.truncate(chunk.len() * Action::COUNT);
+            Ok(q)
+        };
         let forward = || -> Result<Vec<Vec<f32>>, PolicyError> {
+            if on_caller {
+                return chunks.iter().zip(inputs.iter_mut()).map(one).collect();
+            }
             self.pool.install(|| {
                 use rayon::prelude::*;
-                chunks
-                    .par_iter()
-                    .zip(inputs.par_iter_mut())
-                    .map(|(chunk, inputs)| {
-                        observation_inputs(chunk, config, inputs)?;
-                        pad_rows(inputs, rows);
-                        let mut q = q_forward_with(net, host, config, device, inputs)?;
-                        q.truncate(chunk.len() * Action::COUNT);
-                        Ok(q)
-                    })
-                    .collect()
+                chunks.par_iter().zip(inputs.par_iter_mut()).map(one).collect()
             })
         };
         // A panicking backend is a failed decision, reported as one, not a crash.

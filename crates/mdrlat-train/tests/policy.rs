@@ -168,3 +168,27 @@ fn bf16_weights_are_an_opt_in_that_decides_nearly_alike() {
     assert!(d.max_abs > 0.0 && d.max_abs < 2e-2 * d.max_q.max(1e-3), "{d:?}");
     assert!(d.same_action * 10 >= observations.len() * 9, "{d:?}");
 }
+
+/// A one-thread policy runs a single decision on the calling thread, not in its pool: the
+/// same Q-values and action as a two-thread policy's, whether it is called from a plain
+/// thread or from inside another rayon pool, for every variant.
+#[test]
+fn a_single_decision_on_the_calling_thread_decides_as_the_pool_does() {
+    let mut rng = Rng::seed_from_u64(5);
+    let obs = observation(&mut rng);
+    let other = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("pool");
+    for variant in Variant::ALL {
+        let dev = Device::flex();
+        let mut one = GreedyPolicy::untrained(variant, Task::Avoid, 9, &dev, 1).expect("policy");
+        let mut two = GreedyPolicy::untrained(variant, Task::Avoid, 9, &dev, 2).expect("policy");
+        let mut inputs = Inputs::default();
+        observation_inputs(&[&obs], one.config(), &mut inputs).expect("inputs");
+        let want = two.q_values(&inputs).expect("q");
+        assert_eq!(one.q_values(&inputs).expect("q"), want, "{variant}");
+        assert_eq!(other.install(|| one.q_values(&inputs)).expect("q"), want, "{variant} nested");
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        one.act(&[&obs], &[0], &mut a).expect("acts");
+        two.act(&[&obs], &[0], &mut b).expect("acts");
+        assert_eq!(a, b, "{variant}");
+    }
+}

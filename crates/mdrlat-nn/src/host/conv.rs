@@ -76,31 +76,35 @@ impl ConvGeometry {
         cols.reserve(len);
         let [oh, ow] = self.out();
         let (c, kw) = (self.c, self.kw);
-        // One image per work item.
-        cols.spare_capacity_mut()[..len]
-            .par_chunks_mut(self.positions() * k)
-            .zip(x.par_chunks(image))
-            .for_each(|(cols, img)| {
-                let zero = |to: &mut [MaybeUninit<f32>]| to.fill(MaybeUninit::new(0.0));
-                for (row, patch) in cols.chunks_exact_mut(k).enumerate() {
-                    let (y, xo) = (row / ow, row % ow);
-                    for (ky, krow) in patch.chunks_exact_mut(kw * c).enumerate() {
-                        let Some((iy, lo, hi, ix)) = self.span(y, xo, ky) else {
-                            zero(krow);
-                            continue;
-                        };
-                        let src = &img[(iy * self.w + ix) * c..(iy * self.w + ix + hi - lo) * c];
-                        let (before, rest) = krow.split_at_mut(lo * c);
-                        let (span, after) = rest.split_at_mut((hi - lo) * c);
-                        zero(before);
-                        for (d, &s) in span.iter_mut().zip(src) {
-                            *d = MaybeUninit::new(s);
-                        }
-                        zero(after);
+        // One image per work item; a single image on the calling thread (a rayon call from
+        // outside a pool would hand it to a pool thread).
+        let fill = |(cols, img): (&mut [MaybeUninit<f32>], &[f32])| {
+            let zero = |to: &mut [MaybeUninit<f32>]| to.fill(MaybeUninit::new(0.0));
+            for (row, patch) in cols.chunks_exact_mut(k).enumerate() {
+                let (y, xo) = (row / ow, row % ow);
+                for (ky, krow) in patch.chunks_exact_mut(kw * c).enumerate() {
+                    let Some((iy, lo, hi, ix)) = self.span(y, xo, ky) else {
+                        zero(krow);
+                        continue;
+                    };
+                    let src = &img[(iy * self.w + ix) * c..(iy * self.w + ix + hi - lo) * c];
+                    let (before, rest) = krow.split_at_mut(lo * c);
+                    let (span, after) = rest.split_at_mut((hi - lo) * c);
+                    zero(before);
+                    for (d, &s) in span.iter_mut().zip(src) {
+                        *d = MaybeUninit::new(s);
                     }
+                    zero(after);
                 }
-                debug_assert_eq!(cols.len(), oh * ow * k);
-            });
+            }
+            debug_assert_eq!(cols.len(), oh * ow * k);
+        };
+        let spare = &mut cols.spare_capacity_mut()[..len];
+        if batch == 1 {
+            fill((spare, x));
+        } else {
+            spare.par_chunks_mut(self.positions() * k).zip(x.par_chunks(image)).for_each(fill);
+        }
         // SAFETY: the loop above wrote every one of the first `len` values of the spare
         // capacity: each image's `positions · k` values are its `positions` patches of `k`,
         // and each patch's `kh` kernel rows of `kw · c` are written whole (zeros, or zeros,

@@ -398,6 +398,9 @@ pub struct HostNet {
     fusion: Option<[HostLinear; 3]>,
     /// value, advantage, velocity: hidden and output layers.
     heads: Vec<[HostLinear; 2]>,
+    /// Forward passes run every stage on the calling thread (see
+    /// [`HostNet::on_calling_thread`]).
+    sequential: bool,
 }
 
 impl std::fmt::Debug for HostNet {
@@ -503,7 +506,26 @@ impl HostNet {
         if let Some(v) = &net.velocity {
             heads.push(head(v)?);
         }
-        Some(Self { config: config.clone(), depth, laser, fusion, heads })
+        Some(Self { config: config.clone(), depth, laser, fusion, heads, sequential: false })
+    }
+
+    /// This network with forward passes that run every stage on the calling thread, none
+    /// through rayon: for a policy that decides on one thread. Its streams and heads would
+    /// otherwise go side by side through rayon, which, called from a thread outside a pool,
+    /// hands the work to a pool thread and waits for it (~0.06 ms a decision on a
+    /// Sapphire Rapids VM, up to ~0.3 when that thread sleeps). The results are the same.
+    pub fn on_calling_thread(mut self) -> Self {
+        self.sequential = true;
+        self
+    }
+
+    /// `(a(), b())`, side by side through rayon unless [`HostNet::on_calling_thread`].
+    fn both<A: Send, B: Send>(
+        &self,
+        a: impl FnOnce() -> A + Send,
+        b: impl FnOnce() -> B + Send,
+    ) -> (A, B) {
+        if self.sequential { (a(), b()) } else { rayon::join(a, b) }
     }
 
     /// The forward pass; `velocity`: also run the auxiliary head (training), else only the
@@ -528,7 +550,7 @@ impl HostNet {
         let b: usize = parts.iter().map(|p| p.batch).sum();
         let cfg = &self.config;
         let mut t = Tape { batch: b, times: StageClock::start(), ..Tape::default() };
-        let ((depth, dfeat), (laser, lfeat)) = rayon::join(
+        let ((depth, dfeat), (laser, lfeat)) = self.both(
             || self.depth.as_ref().map(|layers| self.depth_forward(layers, parts, b)).unzip(),
             || self.laser.as_ref().map(|layers| self.laser_forward(layers, parts, b)).unzip(),
         );
@@ -546,7 +568,7 @@ impl HostNet {
         }
         if let Some([fd, fl, fo]) = &self.fusion {
             let (dfeat, lfeat) = (dfeat.as_deref().unwrap_or(&[]), lfeat.as_deref().unwrap_or(&[]));
-            let (d, l) = rayon::join(|| fd.forward(dfeat, b), || fl.forward(lfeat, b));
+            let (d, l) = self.both(|| fd.forward(dfeat, b), || fl.forward(lfeat, b));
             let z = outer(&d, &l, b);
             let mut f = fo.forward(&z, b);
             relu_in_place(&mut f);
@@ -570,16 +592,18 @@ impl HostNet {
             .filter(|&(_, rows)| rows > 0)
             .collect();
         let h = &t.h;
-        let outs: Vec<(Vec<f32>, Vec<f32>)> = heads
-            .par_iter()
-            .map(|&(i, rows)| {
-                let [hidden, out] = &self.heads[i];
-                let mut u = hidden.forward(&h[..rows * width], rows);
-                relu_in_place(&mut u);
-                let o = out.forward(&u, rows);
-                (u, o)
-            })
-            .collect();
+        let head = |&(i, rows): &(usize, usize)| {
+            let [hidden, out] = &self.heads[i];
+            let mut u = hidden.forward(&h[..rows * width], rows);
+            relu_in_place(&mut u);
+            let o = out.forward(&u, rows);
+            (u, o)
+        };
+        let outs: Vec<(Vec<f32>, Vec<f32>)> = if self.sequential {
+            heads.iter().map(head).collect()
+        } else {
+            heads.par_iter().map(head).collect()
+        };
         t.times.lap("heads");
         t.q = dueling(&outs[0].1, &outs[1].1, b);
         for (i, (u, o)) in outs.into_iter().enumerate() {
@@ -631,19 +655,25 @@ impl HostNet {
         // Straight from each zero-padded image where the CPU has AVX-512 and there are 16
         // filters; else from its patches.
         let direct = Self::conv1_direct(&g);
-        out.par_chunks_mut(positions * filters).zip(images.par_iter()).for_each_init(
-            || (Vec::new(), Vec::new()),
-            |(padded, patches), (out, image)| {
-                let done = filters == 16
-                    && Self::pad_conv1_image(&g, &direct, image, padded)
-                    && conv16(&direct, padded, wt, out);
-                if !done {
-                    g.extract(image, 1, patches);
-                    gemm_short_by_long(positions, filters, k, patches, wt, out, true);
-                }
-                relu_in_place(out);
-            },
-        );
+        let one = |(padded, patches): &mut (Vec<f32>, Vec<f32>),
+                   (out, image): (&mut [f32], &&[f32])| {
+            let done = filters == 16
+                && Self::pad_conv1_image(&g, &direct, image, padded)
+                && conv16(&direct, padded, wt, out);
+            if !done {
+                g.extract(image, 1, patches);
+                gemm_short_by_long(positions, filters, k, patches, wt, out, true);
+            }
+            relu_in_place(out);
+        };
+        // One image (a single decision) on the calling thread, as in `im2col`.
+        if let [image] = images {
+            one(&mut Default::default(), (&mut out, image));
+        } else {
+            out.par_chunks_mut(positions * filters)
+                .zip(images.par_iter())
+                .for_each_init(|| (Vec::new(), Vec::new()), one);
+        }
         out
     }
 
