@@ -76,8 +76,8 @@ impl ConvGeometry {
         cols.reserve(len);
         let [oh, ow] = self.out();
         let (c, kw) = (self.c, self.kw);
-        // One image per work item; a single image on the calling thread (a rayon call from
-        // outside a pool would hand it to a pool thread).
+        // One image per work item; a single image, or inside `gemm::on_this_thread`, on the
+        // calling thread (a rayon call from outside a pool would hand it to a pool thread).
         let fill = |(cols, img): (&mut [MaybeUninit<f32>], &[f32])| {
             let zero = |to: &mut [MaybeUninit<f32>]| to.fill(MaybeUninit::new(0.0));
             for (row, patch) in cols.chunks_exact_mut(k).enumerate() {
@@ -100,8 +100,8 @@ impl ConvGeometry {
             debug_assert_eq!(cols.len(), oh * ow * k);
         };
         let spare = &mut cols.spare_capacity_mut()[..len];
-        if batch == 1 {
-            fill((spare, x));
+        if batch == 1 || !super::gemm::may_split() {
+            spare.chunks_mut(self.positions() * k).zip(x.chunks(image)).for_each(fill);
         } else {
             spare.par_chunks_mut(self.positions() * k).zip(x.par_chunks(image)).for_each(fill);
         }

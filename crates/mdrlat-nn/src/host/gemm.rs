@@ -7,6 +7,32 @@
 /// thread in one order, so the result does not depend on the thread count).
 const PARALLEL_MACS: usize = 1 << 21;
 
+thread_local! {
+    /// Inside [`on_this_thread`]: every product and patch cut stays on this thread.
+    static THIS_THREAD: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f` with the host kernels' products and patch cuts kept on the calling thread, no
+/// rayon call among them: from a thread outside a pool, rayon would run them on the global
+/// pool (every core) and wait (see `HostNet::on_calling_thread`).
+pub(crate) fn on_this_thread<R>(f: impl FnOnce() -> R) -> R {
+    /// Restores the flag, also when `f` panics.
+    struct Restore(bool);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            THIS_THREAD.set(self.0);
+        }
+    }
+    let _restore = Restore(THIS_THREAD.replace(true));
+    f()
+}
+
+/// Whether work may be split over the current rayon pool's threads: more than one, and not
+/// inside [`on_this_thread`].
+pub(crate) fn may_split() -> bool {
+    !THIS_THREAD.get() && rayon::current_num_threads() > 1
+}
+
 /// One operand of a product: row-major `rows × cols` data, or its transpose stored
 /// row-major (`cols × rows`).
 #[derive(Debug, Clone, Copy)]
@@ -114,7 +140,7 @@ unsafe fn product(
     }
     let (a_rs, a_cs) = a.strides(m, k);
     let (b_rs, b_cs) = b.strides(k, n);
-    let parallelism = if m * n * k >= PARALLEL_MACS && rayon::current_num_threads() > 1 {
+    let parallelism = if m * n * k >= PARALLEL_MACS && may_split() {
         gemm::Parallelism::Rayon(0)
     } else {
         gemm::Parallelism::None
@@ -236,7 +262,7 @@ pub(crate) fn gemm_short_by_long(
                 }
             }
         };
-        let parallel = m * n * k >= PARALLEL_MACS && rayon::current_num_threads() > 1;
+        let parallel = m * n * k >= PARALLEL_MACS && may_split();
         // Each output element is still summed by one thread in one order.
         if parallel && n >= 2 * avx512::STRIP {
             let half = n.div_ceil(avx512::STRIP).div_ceil(2) * avx512::STRIP;
@@ -309,7 +335,7 @@ pub(crate) fn gemm_tall(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) ->
                 );
             }
         };
-        if m * n * k >= PARALLEL_MACS && rayon::current_num_threads() > 1 {
+        if m * n * k >= PARALLEL_MACS && may_split() {
             let half = m.div_ceil(2 * 16) * 16;
             rayon::join(|| run(0, half), || run(half, m));
         } else {
@@ -1569,6 +1595,22 @@ mod tests {
         }
     }
 
+    /// Inside `on_this_thread` nothing may split over rayon's threads, even in a pool of
+    /// two; the flag is restored afterwards, also after a panic.
+    #[test]
+    fn on_this_thread_keeps_work_on_the_calling_thread() {
+        let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("pool");
+        two.install(|| {
+            assert!(may_split());
+            assert!(!on_this_thread(may_split));
+            assert!(on_this_thread(|| on_this_thread(|| true) && !may_split()));
+            assert!(may_split());
+            let panicked = std::panic::catch_unwind(|| on_this_thread(|| panic!("inside")));
+            assert!(panicked.is_err());
+            assert!(may_split());
+        });
+    }
+
     /// One row (a single decision): the kernel that reads only the rows of non-zero
     /// inputs gives the `gemm` crate's vector-matrix sums exactly (up to the sign of an exact
     /// zero), with a ReLU's share of zeros, none, or all, over and beside a group of four.
@@ -1580,12 +1622,16 @@ mod tests {
         for (n, k) in [(16, 1), (16, 2), (16, 3), (64, 1024), (128, 2560), (512, 4097), (512, 8192)]
         {
             for zero_every in [0, 2, 3, 1] {
-                let a: Vec<f32> = (0..k)
+                let mut a: Vec<f32> = (0..k)
                     .map(|p| {
                         let v = ((p * 7) % 13) as f32 * 0.37 - 2.1;
                         if zero_every > 0 && (p * 5) % 7 < 7 / zero_every { 0.0 } else { v }
                     })
                     .collect();
+                // A NaN input must reach every output, as in the `gemm` crate's sums.
+                if zero_every == 3 && k > 100 {
+                    a[k / 2] = f32::NAN;
+                }
                 let b: Vec<f32> = (0..k * n).map(|v| ((v * 5) % 11) as f32 * 0.113 - 0.6).collect();
                 for accumulate in [false, true] {
                     let start: Vec<f32> = (0..n).map(|j| j as f32 * 0.01 - 0.07).collect();
@@ -1693,10 +1739,12 @@ mod tests {
     }
 
     /// The direct first-layer convolution against its definition, at the paper's stride
-    /// (its constant-stride tiles) and at others, with every tile width (16 to 1) in a row.
+    /// (its constant-stride tiles) and at others, with every tile width (16 to 1) at both.
     #[test]
     fn conv16_matches_the_definition() {
-        for shape in [(4, 10, 14, 8, 2, 31), (2, 3, 5, 2, 3, 23), (1, 2, 19, 3, 2, 7)] {
+        for shape in
+            [(4, 10, 14, 8, 2, 31), (2, 3, 5, 2, 3, 23), (1, 2, 19, 3, 2, 7), (1, 2, 19, 3, 1, 9)]
+        {
             let c = ConvCase::new(shape);
             let g = c.g;
             let wt = ConvCase::values(g.channels * g.kh * g.kw * 16);

@@ -510,10 +510,11 @@ impl HostNet {
     }
 
     /// This network with forward passes that run every stage on the calling thread, none
-    /// through rayon: for a policy that decides on one thread. Its streams and heads would
-    /// otherwise go side by side through rayon, which, called from a thread outside a pool,
-    /// hands the work to a pool thread and waits for it (~0.06 ms a decision on a
-    /// Sapphire Rapids VM, up to ~0.3 when that thread sleeps). The results are the same.
+    /// through rayon: for a policy that decides on one thread. Its streams and heads, and
+    /// its products and patch cuts, would otherwise go through rayon, which, called from a
+    /// thread outside a pool, runs them on the global pool and waits for it (~0.08 ms a
+    /// decision on a Sapphire Rapids VM, up to ~0.3 when that pool sleeps; on every core
+    /// where a product is large enough to split). The results are the same.
     pub fn on_calling_thread(mut self) -> Self {
         self.sequential = true;
         self
@@ -543,6 +544,14 @@ impl HostNet {
     /// # Panics
     /// If an input the variant reads has the wrong size.
     pub fn forward_parts<'a>(&self, parts: &[HostInputs<'a>], velocity_rows: usize) -> Tape<'a> {
+        if self.sequential {
+            return gemm::on_this_thread(|| self.forward_stages(parts, velocity_rows));
+        }
+        self.forward_stages(parts, velocity_rows)
+    }
+
+    /// [`HostNet::forward_parts`]' stages.
+    fn forward_stages<'a>(&self, parts: &[HostInputs<'a>], velocity_rows: usize) -> Tape<'a> {
         assert!(
             !self.heads_released() && !self.fusion_released(),
             "forward pass of a network after release_heads / release_fusion"
@@ -666,9 +675,13 @@ impl HostNet {
             }
             relu_in_place(out);
         };
-        // One image (a single decision) on the calling thread, as in `im2col`.
-        if let [image] = images {
-            one(&mut Default::default(), (&mut out, image));
+        // One image (a single decision), or inside `gemm::on_this_thread`, on the calling
+        // thread, as in `im2col`.
+        if images.len() == 1 || !gemm::may_split() {
+            let mut scratch = Default::default();
+            for item in out.chunks_mut(positions * filters).zip(images) {
+                one(&mut scratch, item);
+            }
         } else {
             out.par_chunks_mut(positions * filters)
                 .zip(images.par_iter())
