@@ -76,6 +76,12 @@ pub mod products {
 /// Width of the heads' hidden layers, and the bilinear fusion's `L_d`, `L_l`.
 use crate::net::{FUSION_DEPTH as FUSION_D, FUSION_LASER as FUSION_L, HIDDEN};
 
+/// `(a(), b())`, side by side through rayon where work may split (not on a one-thread pool,
+/// nor in a forward of [`HostNet::on_calling_thread`]).
+fn both<A: Send, B: Send>(a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + Send) -> (A, B) {
+    if gemm::may_split() { rayon::join(a, b) } else { (a(), b()) }
+}
+
 /// Row-wise concatenation of `pieces` (each `[b, width_i]`) into `[b, width]`.
 fn concat_columns(pieces: &[(&[f32], usize)], b: usize, width: usize) -> Vec<f32> {
     let mut out = vec![0.0; b * width];
@@ -520,15 +526,6 @@ impl HostNet {
         self
     }
 
-    /// `(a(), b())`, side by side through rayon unless [`HostNet::on_calling_thread`].
-    fn both<A: Send, B: Send>(
-        &self,
-        a: impl FnOnce() -> A + Send,
-        b: impl FnOnce() -> B + Send,
-    ) -> (A, B) {
-        if self.sequential { (a(), b()) } else { rayon::join(a, b) }
-    }
-
     /// The forward pass; `velocity`: also run the auxiliary head (training), else only the
     /// Q-values (acting, eq. 10 targets).
     ///
@@ -559,7 +556,7 @@ impl HostNet {
         let b: usize = parts.iter().map(|p| p.batch).sum();
         let cfg = &self.config;
         let mut t = Tape { batch: b, times: StageClock::start(), ..Tape::default() };
-        let ((depth, dfeat), (laser, lfeat)) = self.both(
+        let ((depth, dfeat), (laser, lfeat)) = both(
             || self.depth.as_ref().map(|layers| self.depth_forward(layers, parts, b)).unzip(),
             || self.laser.as_ref().map(|layers| self.laser_forward(layers, parts, b)).unzip(),
         );
@@ -577,7 +574,7 @@ impl HostNet {
         }
         if let Some([fd, fl, fo]) = &self.fusion {
             let (dfeat, lfeat) = (dfeat.as_deref().unwrap_or(&[]), lfeat.as_deref().unwrap_or(&[]));
-            let (d, l) = self.both(|| fd.forward(dfeat, b), || fl.forward(lfeat, b));
+            let (d, l) = both(|| fd.forward(dfeat, b), || fl.forward(lfeat, b));
             let z = outer(&d, &l, b);
             let mut f = fo.forward(&z, b);
             relu_in_place(&mut f);
@@ -608,10 +605,10 @@ impl HostNet {
             let o = out.forward(&u, rows);
             (u, o)
         };
-        let outs: Vec<(Vec<f32>, Vec<f32>)> = if self.sequential {
-            heads.iter().map(head).collect()
-        } else {
+        let outs: Vec<(Vec<f32>, Vec<f32>)> = if gemm::may_split() {
             heads.par_iter().map(head).collect()
+        } else {
+            heads.iter().map(head).collect()
         };
         t.times.lap("heads");
         t.q = dueling(&outs[0].1, &outs[1].1, b);
