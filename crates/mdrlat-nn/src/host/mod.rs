@@ -283,13 +283,8 @@ impl HostConv {
     fn transposed_weight(&self) -> &[f32] {
         self.transposed.get_or_init(|| {
             let (w, filters) = (self.weight.data(), self.geometry.out_channels);
-            let k = w.len() / filters.max(1);
             let mut wt = vec![0.0; w.len()];
-            for (o, row) in w.chunks_exact(k.max(1)).enumerate() {
-                for (j, &v) in row.iter().enumerate() {
-                    wt[j * filters + o] = v;
-                }
-            }
+            transpose_into(w, filters, w.len() / filters.max(1), &mut wt, false);
             wt
         })
     }
@@ -773,7 +768,8 @@ impl HostNet {
         }
         if partial.first().is_some_and(|&(_, transposed)| transposed) {
             let dwt = std::mem::take(&mut dw);
-            dw = (0..filters * k).map(|i| dwt[(i % k) * filters + i / k]).collect();
+            dw = vec![0.0; filters * k];
+            transpose_into(&dwt, k, filters, &mut dw, false);
         }
         (dw, column_sums(dy, filters))
     }
