@@ -8,6 +8,10 @@
 #   MDRLAT_TCH_BIN=target-tch/release/mdrlat MDRLAT_WGPU_BIN=target-wgpu/release/mdrlat \
 #     LONG_SECONDS=240 bash scripts/gpu-check.sh
 #
+# With MDRLAT_TCH_BASE=<an earlier tch binary>, it also measures that one beside this one, in
+# the same lease: MDRLAT's `bench train` alternately (base-*.jsonl), `--profile` of each, and a
+# real run of LONG_SECONDS each (base-progress.csv beside progress.csv).
+#
 # `--device tch-cuda` needs a binary built with `--features tch` against the LibTorch of the
 # machine's own PyTorch, same version, with libtorch_cuda in the folder it was linked against
 # (burn-tch decides at build time whether a binary may use a GPU): on a machine without CUDA,
@@ -19,6 +23,7 @@ set -uo pipefail
 # Paths given relative to where the script was started from, before moving to the root.
 absolute() { if [ -n "$1" ]; then realpath -m "$1"; fi; }
 TCH=$(absolute "${MDRLAT_TCH_BIN:-}")
+BASE=$(absolute "${MDRLAT_TCH_BASE:-}")
 WGPU=$(absolute "${MDRLAT_WGPU_BIN:-}")
 OUT=$(absolute "${OUT:-}")
 cd "$(dirname "$0")/.."
@@ -45,9 +50,34 @@ if [ -z "$TORCH_LIB" ] || [ ! -d "$TORCH_LIB" ]; then
   echo "no LibTorch: python3 cannot import torch and MDRLAT_TORCH_LIB is unset; skipping tch-cuda"
   TCH=""
 fi
-TCH_RUN=(env "LD_LIBRARY_PATH=$TORCH_LIB${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
-  "GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=17179869184"
-  "$TCH")
+TCH_ENV=(env "LD_LIBRARY_PATH=$TORCH_LIB${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+  "GLIBC_TUNABLES=glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=17179869184")
+TCH_RUN=("${TCH_ENV[@]}" "$TCH")
+BASE_RUN=("${TCH_ENV[@]}" "$BASE")
+
+# A real training run of LONG_SECONDS (paper settings) with a binary wrapper; its metrics
+# go to $OUT/<label>long-metrics.csv and long-eval.csv, the step it had reached every 10 s to
+# $OUT/<label>progress.csv.
+long_run() { # label binary-wrapper...
+  local label=$1 run="$RUNS/long-$1"
+  shift
+  # A background job of a script ignores SIGINT, and `mdrlat train` has no handler: TERM,
+  # through `timeout` (which passes it on), with a bound in case this loop is cut short.
+  timeout -s TERM $((LONG_SECONDS + 60)) "$@" train --device tch-cuda \
+    --variant "$LONG_VARIANT" --seed 0 --out "$run" &
+  local pid=$! start
+  echo "unix_s,step" >"$OUT/${label}progress.csv"
+  start=$(date +%s)
+  while kill -0 "$pid" 2>/dev/null && [ $(($(date +%s) - start)) -lt "$LONG_SECONDS" ]; do
+    sleep 10
+    step=$(tail -n +2 "$run/metrics.csv" 2>/dev/null | tail -n 1 | cut -d, -f1)
+    echo "$(date +%s.%N),${step:-0}" | tee -a "$OUT/${label}progress.csv"
+  done
+  kill -TERM "$pid" 2>/dev/null
+  wait "$pid"
+  cp "$run/metrics.csv" "$OUT/${label}long-metrics.csv"
+  cp "$run/eval.csv" "$OUT/${label}long-eval.csv"
+}
 
 # Same seed, same 400 steps (300 gradient steps), on cpu and on the GPU: the losses of
 # metrics.csv side by side (LibTorch's cuDNN convolutions may use TF32, so not bit-equal).
@@ -77,24 +107,32 @@ if [ -n "$TCH" ] && [ -x "$TCH" ]; then
         grep '"bench":"train"' | tee -a "$OUT/bench-tch-cuda.jsonl"
     done
 
+    if [ -n "$BASE" ] && [ -x "$BASE" ]; then
+      stage "side by side: MDRLAT bench train, the base binary ($BASE) and this one, twice"
+      for round in 1 2; do
+        timeout 60 "${BASE_RUN[@]}" bench train --device tch-cuda --variants mdrlat --seconds 2 --json |
+          grep '"bench":"train"' | tee -a "$OUT/base-bench-tch-cuda.jsonl"
+        timeout 60 "${TCH_RUN[@]}" bench train --device tch-cuda --variants mdrlat --seconds 2 --json |
+          grep '"bench":"train"' | tee -a "$OUT/bench-tch-cuda.jsonl"
+      done
+      stage "the base binary: where an MDRLAT step goes"
+      timeout 60 "${BASE_RUN[@]}" bench train --device tch-cuda --variants mdrlat --profile --seconds 1
+      stage "the base binary: a real $LONG_VARIANT run for ${LONG_SECONDS}s (paper settings)"
+      long_run base- "${BASE_RUN[@]}"
+    fi
     stage "tch-cuda: a real $LONG_VARIANT run for ${LONG_SECONDS}s (paper settings)"
-    run="$RUNS/long"
-    # A background job of a script ignores SIGINT, and `mdrlat train` has no handler: TERM,
-    # through `timeout` (which passes it on), with a bound in case this loop is cut short.
-    timeout -s TERM $((LONG_SECONDS + 60)) "${TCH_RUN[@]}" train --device tch-cuda \
-      --variant "$LONG_VARIANT" --seed 0 --out "$run" &
-    pid=$!
-    echo "unix_s,step" >"$OUT/progress.csv"
-    start=$(date +%s)
-    while kill -0 "$pid" 2>/dev/null && [ $(($(date +%s) - start)) -lt "$LONG_SECONDS" ]; do
-      sleep 10
-      step=$(tail -n +2 "$run/metrics.csv" 2>/dev/null | tail -n 1 | cut -d, -f1)
-      echo "$(date +%s.%N),${step:-0}" | tee -a "$OUT/progress.csv"
-    done
-    kill -TERM "$pid" 2>/dev/null
-    wait "$pid"
-    cp "$run/metrics.csv" "$OUT/long-metrics.csv"
-    cp "$run/eval.csv" "$OUT/long-eval.csv"
+    long_run "" "${TCH_RUN[@]}"
+
+    # Where the GPU's time goes, where Nsight Systems is installed.
+    if command -v nsys >/dev/null; then
+      stage "nsys: CUDA kernels and transfers of a 1 s MDRLAT bench"
+      timeout 120 nsys profile --stats=false -o "$RUNS/nsys" --force-overwrite true \
+        "${TCH_RUN[@]}" bench train --device tch-cuda --variants mdrlat --seconds 1 >/dev/null &&
+        timeout 60 nsys stats --report cuda_gpu_kern_sum,cuda_gpu_mem_time_sum,cuda_api_sum \
+          "$RUNS/nsys.nsys-rep" 2>&1 | head -80
+    else
+      stage "no nsys here ($(command -v ncu nvprof 2>/dev/null | tr '\n' ' '))"
+    fi
   else
     stage "tch-cuda failed to start: what the binary links"
     LD_LIBRARY_PATH="$TORCH_LIB" ldd "$TCH" | grep -E "not found|torch|c10" || true

@@ -248,6 +248,20 @@ pub fn is_flex(device: &Device) -> bool {
     device.clone().inner() == Device::flex()
 }
 
+/// Whether `device` is LibTorch's (its CPU or a CUDA GPU; always false in a build without
+/// the `tch` feature).
+pub fn is_libtorch(device: &Device) -> bool {
+    #[cfg(feature = "tch")]
+    {
+        matches!(device.clone().inner().as_dispatch(), burn::backend::DispatchDevice::LibTorch(_))
+    }
+    #[cfg(not(feature = "tch"))]
+    {
+        let _ = device;
+        false
+    }
+}
+
 /// Whether the depth stream's first layer should be fed patches cut on the host (burn's
 /// `flex` CPU backend, whose direct convolution is slow) rather than the stacks themselves
 /// (LibTorch and the GPUs convolve well, and patches are 2.2× the bytes to move).

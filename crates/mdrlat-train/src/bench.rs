@@ -3,7 +3,7 @@
 
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner};
-use crate::replay::{Batch, ReplayBuffer, Transition};
+use crate::replay::{Batch, DepthLayout, ReplayBuffer, Transition};
 use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Rng};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
@@ -28,7 +28,55 @@ pub fn random_batch(variant: Variant, size: usize, seed: u64) -> Batch {
         odom: fill(size * 6),
         goal: Vec::new(),
         next_goal: Vec::new(),
+        depth_frames: Default::default(),
     }
+}
+
+/// A random batch for `learner`'s gradient steps: [`random_batch`], or where the learner takes
+/// its depth input as frames ([`Learner::depth_layout`]), `size` transitions of one episode
+/// of random frames ([`random_replay`]) in that layout, as a training run sends them.
+pub fn learner_batch(learner: &Learner, size: usize, seed: u64) -> Batch {
+    let variant = learner.variant();
+    match learner.depth_layout() {
+        DepthLayout::Stacks => random_batch(variant, size, seed),
+        layout => {
+            let replay = random_replay(variant, size, seed);
+            let mut out = Batch::default();
+            replay.write_batch_as(&(0..size).collect::<Vec<_>>(), &mut out, layout);
+            out
+        }
+    }
+}
+
+/// A replay buffer of `n` transitions of one long episode of random frames (laser
+/// 0.1–5.6 m, depth 0.4–10 m), with actions, rewards, terminations and velocities as
+/// [`random_batch`] has them.
+pub fn random_replay(variant: Variant, n: usize, seed: u64) -> ReplayBuffer {
+    let mut rng = Rng::seed_from_u64(seed);
+    let mut replay = ReplayBuffer::new(n, n, variant.uses_laser(), variant.uses_depth());
+    let frame = |replay: &mut ReplayBuffer, rng: &mut Rng| {
+        let laser: Vec<f32> = (0..LASER_BEAMS).map(|_| rng.range_f32(0.1, 5.6)).collect();
+        let depth: Vec<f32> = (0..DEPTH_LEN).map(|_| rng.range_f32(0.4, 10.0)).collect();
+        replay.push_frame(&laser, &depth)
+    };
+    let mut ids = [frame(&mut replay, &mut rng); FRAME_STACK];
+    for i in 0..n {
+        let obs = ids;
+        ids.rotate_left(1);
+        ids[FRAME_STACK - 1] = frame(&mut replay, &mut rng);
+        let t = Transition {
+            obs,
+            next: ids,
+            action: (i % 10) as u8,
+            reward: rng.uniform() as f32,
+            terminated: i % 7 == 0,
+            odom: std::array::from_fn(|_| rng.uniform() as f32),
+            goal: [0.0; 3],
+            next_goal: [0.0; 3],
+        };
+        replay.push(t);
+    }
+    replay
 }
 
 /// Median milliseconds of `f` over runs filling at least `min_time` (after one warm-up).
@@ -64,7 +112,7 @@ pub fn update_ms(
     let config = TrainConfig { variant, batch_size: batch, ..TrainConfig::default() };
     let mut learner = Learner::new(&config, Task::Avoid, device);
     learner.set_host_kernels(host_kernels);
-    let b = random_batch(variant, batch, 1);
+    let b = learner_batch(&learner, batch, 1);
     median_ms(min_time, || {
         learner.update(&b);
     })
@@ -209,35 +257,13 @@ pub fn replay_bytes(variant: Variant, capacity: usize) -> usize {
 /// Median milliseconds of sampling a batch of `batch` transitions from a replay buffer of
 /// 2,000 (random frames, one long episode): the frame lookups, u16 → f32 and normalisation
 /// that every gradient step starts with.
-pub fn sample_ms(variant: Variant, batch: usize, min_time: Duration) -> f64 {
-    let (n, mut rng) = (2_000, Rng::seed_from_u64(4));
-    let mut replay = ReplayBuffer::new(n, n, variant.uses_laser(), variant.uses_depth());
-    let frame = |replay: &mut ReplayBuffer, rng: &mut Rng| {
-        let laser: Vec<f32> = (0..LASER_BEAMS).map(|_| rng.range_f32(0.1, 5.6)).collect();
-        let depth: Vec<f32> = (0..DEPTH_LEN).map(|_| rng.range_f32(0.4, 10.0)).collect();
-        replay.push_frame(&laser, &depth)
-    };
-    let mut ids = [frame(&mut replay, &mut rng); FRAME_STACK];
-    for _ in 0..n {
-        let obs = ids;
-        ids.rotate_left(1);
-        ids[FRAME_STACK - 1] = frame(&mut replay, &mut rng);
-        let t = Transition {
-            obs,
-            next: ids,
-            action: 0,
-            reward: 0.0,
-            terminated: false,
-            odom: [0.0; 2 * mdrlat_core::ODOM_HISTORY],
-            goal: [0.0; 3],
-            next_goal: [0.0; 3],
-        };
-        replay.push(t);
-    }
+pub fn sample_ms(variant: Variant, batch: usize, layout: DepthLayout, min_time: Duration) -> f64 {
+    let replay = random_replay(variant, 2_000, 4);
+    let mut rng = Rng::seed_from_u64(5);
     let mut out = Batch::default();
     median_ms(min_time, || {
         let indices = replay.sample_indices(batch, &mut rng);
-        replay.write_batch(&indices, &mut out);
+        replay.write_batch_as(&indices, &mut out, layout);
     })
     .0
 }
@@ -254,7 +280,7 @@ pub fn profile(
 ) -> Vec<(String, f64)> {
     let config = TrainConfig { variant, batch_size: batch, ..TrainConfig::default() };
     let mut learner = Learner::new(&config, Task::Avoid, device);
-    let b = random_batch(variant, batch, 3);
+    let b = learner_batch(&learner, batch, 3);
     // Per stage: forward and backward samples.
     let mut stages: Vec<(&'static str, Vec<f64>, Vec<f64>)> = Vec::new();
     let start = Instant::now();
@@ -285,10 +311,11 @@ pub fn profile(
     let (targets, _) = median_ms(min_time, || {
         learner.td_targets(&b);
     });
-    let sample = sample_ms(variant, batch, min_time);
-    let patches = variant.uses_depth().then(|| {
+    let layout = learner.depth_layout();
+    let sample = sample_ms(variant, batch, layout, min_time);
+    let to_device = variant.uses_depth().then(|| {
         median_ms(min_time, || {
-            crate::learner::tensor4(&b.depth, batch, device);
+            learner.depth_to_device(&b);
         })
         .0
     });
@@ -306,12 +333,19 @@ pub fn profile(
     let share = 100.0 * fused as f64 / (fused + fallback).max(1) as f64;
     out.push(("= forward with autodiff, one pass".into(), forward));
     out.push(("= backward, stage by stage".into(), backward));
-    out.push(("sampling a batch from the replay buffer (frames to f32 stacks)".into(), sample));
-    if let Some(ms) = patches {
-        out.push((
-            "one batch's depth input to the device (flex: patches cut on the host)".into(),
-            ms,
-        ));
+    let (sampling, depth) = match layout {
+        DepthLayout::Stacks => (
+            "sampling a batch from the replay buffer (frames to f32 stacks)",
+            "a batch's depth input, s and s', to the device (flex: patches cut on the host)",
+        ),
+        DepthLayout::Frames => (
+            "sampling a batch from the replay buffer (its distinct depth frames as stored)",
+            "a batch's depth input, s and s', to the device (frames as u16, stacks made there)",
+        ),
+    };
+    out.push((sampling.into(), sample));
+    if let Some(ms) = to_device {
+        out.push((depth.into(), ms));
     }
     out.push(("target forwards (eq. 10, 2 passes; side by side on flex)".into(), targets));
     out.push((
@@ -329,7 +363,10 @@ pub fn profile(
     } else {
         (
             "step phase 2: losses and backward".to_string(),
-            format!("step phase 3: Adam ({share:.0}% of parameter updates fused) + plain copy"),
+            format!(
+                "step phase 3: Adam ({share:.0}% of parameter updates fused) + plain copy + \
+                 reading the losses"
+            ),
         )
     };
     out.push((two, median(&mut p1)));

@@ -3,7 +3,7 @@
 
 use crate::adam::{AdamCounts, FusedAdam};
 use crate::config::TrainConfig;
-use crate::replay::Batch;
+use crate::replay::{Batch, DepthLayout};
 use mdrlat_core::{
     Action, DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY, PolicyError,
     greedy_actions,
@@ -27,6 +27,19 @@ pub struct Losses {
     pub at: f32,
     /// Mean Q(s, a) of the batch, for monitoring.
     pub q_mean: f32,
+}
+
+/// A gradient step's [`Losses`] still on the device, `[td, at, q_mean]`: read in one
+/// transfer after the step's work is queued, since every read waits for the device (three
+/// reads in the middle of a step stalled a GPU three times).
+struct PendingLosses(Tensor<1>);
+
+impl PendingLosses {
+    fn read(self) -> Losses {
+        let v = self.0.into_data().try_to_vec::<f32>().unwrap_or_default();
+        let at = |i: usize| v.get(i).copied().unwrap_or(f32::NAN);
+        Losses { td: at(0), at: at(1), q_mean: at(2) }
+    }
 }
 
 /// Network inputs of a batch of observations, as flat arrays in the network's layout.
@@ -103,6 +116,8 @@ pub struct Learner {
     /// Gradient steps on the host kernels where the backend allows (see
     /// [`Learner::uses_host_kernels`]).
     host_kernels: bool,
+    /// [`crate::replay::depth_table`] on the device, for batches of frames (made on first use).
+    depth_table: std::sync::OnceLock<Tensor<1>>,
 }
 
 impl std::fmt::Debug for Learner {
@@ -112,6 +127,19 @@ impl std::fmt::Debug for Learner {
             .field("updates", &self.updates)
             .finish()
     }
+}
+
+/// A batch's network inputs: laser stacks, depth input, goals (each where the network reads
+/// it).
+type NetInputs = (Option<Tensor<3>>, Option<mdrlat_nn::DepthInput>, Option<Tensor<2>>);
+
+/// `inputs` as inputs of a forward with autodiff (constants of its graph).
+fn with_autodiff((l, d, g): NetInputs) -> NetInputs {
+    let d = d.map(|d| match d {
+        mdrlat_nn::DepthInput::Stacks(t) => mdrlat_nn::DepthInput::Stacks(t.autodiff()),
+        mdrlat_nn::DepthInput::Patches(t) => mdrlat_nn::DepthInput::Patches(t.autodiff()),
+    });
+    (l.map(Tensor::autodiff), d, g.map(Tensor::autodiff))
 }
 
 /// Laser stacks `[B, 4, 512]` as a tensor.
@@ -297,6 +325,7 @@ impl Learner {
             phase_ms: [0.0; 3],
             side_by_side,
             host_kernels: true,
+            depth_table: std::sync::OnceLock::new(),
         }
     }
 
@@ -320,22 +349,81 @@ impl Learner {
         self.updates
     }
 
-    /// A batch's `s` (`next`: `s'`) as the network's input tensors.
-    fn inputs<const AD: bool>(
-        &self,
-        batch: &Batch,
-        next: bool,
-    ) -> (Option<Tensor<3>>, Option<mdrlat_nn::DepthInput>, Option<Tensor<2>>) {
-        let dev = if AD { &self.train_device } else { &self.device };
+    /// How this learner wants its batches' depth input: as frames on LibTorch (the CPU or a
+    /// GPU builds the stacks, from a third of the bytes), as stacks elsewhere (the host
+    /// kernels read them, and `flex` cuts patches from them on the host).
+    pub fn depth_layout(&self) -> DepthLayout {
+        if self.variant.uses_depth() && mdrlat_nn::is_libtorch(&self.device) {
+            DepthLayout::Frames
+        } else {
+            DepthLayout::Stacks
+        }
+    }
+
+    /// A batch's distinct depth frames on the device, normalised (`[F, 128 × 160]`), where
+    /// the batch carries frames ([`DepthLayout::Frames`]): the stored millimetres go as
+    /// 16-bit integers and become network inputs through [`crate::replay::depth_table`], so
+    /// the stacks hold exactly the values of [`DepthLayout::Stacks`].
+    fn device_frames(&self, batch: &Batch) -> Option<Tensor<2>> {
+        let frames = &batch.depth_frames;
+        if frames.is_empty() {
+            return None;
+        }
+        let table = self.depth_table.get_or_init(|| {
+            // Entry j is the value of the millimetres whose bits read j − 32768 as an i16.
+            let t = crate::replay::depth_table();
+            let rotated: Vec<f32> =
+                (0..1usize << 16).map(|j| t[(j + (1 << 15)) & 0xFFFF]).collect();
+            Tensor::from_data(TensorData::new(rotated, [1 << 16]), &self.device)
+        });
+        // The bits of each u16 as an i16 (16-bit integers travel as they are).
+        let mm: Vec<i16> = frames.mm.iter().map(|&v| v as i16).collect();
+        let mm = Tensor::<1, Int>::from_data(
+            TensorData::new(mm, [frames.mm.len()]),
+            mdrlat_nn::burn::tensor::TensorCreationOptions::new(self.device.clone())
+                .with_dtype(mdrlat_nn::burn::tensor::DType::I16),
+        );
+        let index = mm.cast(mdrlat_nn::burn::tensor::IntDType::I64) + (1 << 15);
+        Some(table.clone().select(0, index).reshape([frames.len(), DEPTH_ROWS * DEPTH_COLS]))
+    }
+
+    /// Puts a batch's depth inputs of `s` and `s'` on the device as a gradient step does
+    /// (for `bench train --profile`).
+    pub fn depth_to_device(&self, batch: &Batch) {
+        let frames = self.device_frames(batch);
+        for next in [false, true] {
+            let _ = self.inputs(batch, frames.as_ref(), next);
+        }
+    }
+
+    /// A batch's `s` (`next`: `s'`) as the network's input tensors on the plain device (see
+    /// [`with_autodiff`] for the online forward); the depth stacks from `frames` (of
+    /// [`Learner::device_frames`]) where the batch carries frames.
+    fn inputs(&self, batch: &Batch, frames: Option<&Tensor<2>>, next: bool) -> NetInputs {
+        let dev = &self.device;
         let (laser, depth, goal) = if next {
             (&batch.next_laser, &batch.next_depth, &batch.next_goal)
         } else {
             (&batch.laser, &batch.depth, &batch.goal)
         };
         let b = batch.size;
+        let depth = self.variant.uses_depth().then(|| match frames {
+            Some(frames) => {
+                let rows = if next { &batch.depth_frames.next } else { &batch.depth_frames.obs };
+                let rows =
+                    Tensor::<1, Int>::from_data(TensorData::new(rows.clone(), [rows.len()]), dev);
+                mdrlat_nn::DepthInput::Stacks(frames.clone().select(0, rows).reshape([
+                    b,
+                    FRAME_STACK,
+                    DEPTH_ROWS,
+                    DEPTH_COLS,
+                ]))
+            }
+            None => tensor4(depth, b, dev),
+        });
         (
             self.variant.uses_laser().then(|| tensor3(laser, b, dev)),
-            self.variant.uses_depth().then(|| tensor4(depth, b, dev)),
+            depth,
             goal_tensor(goal, b, self.net_config.goal_dim, dev),
         )
     }
@@ -379,9 +467,9 @@ impl Learner {
     ///
     /// # Shapes
     /// `[B, 1]`, on the plain device.
-    fn targets(&self, batch: &Batch) -> Tensor<2> {
+    fn targets(&self, batch: &Batch, frames: Option<&Tensor<2>>) -> Tensor<2> {
         let b = batch.size;
-        let (nl, nd, ng) = self.inputs::<false>(batch, true);
+        let (nl, nd, ng) = self.inputs(batch, frames, true);
         let (online_next, target_next) = self.both(
             || self.plain.q_values(nl.clone(), nd.clone(), ng.clone()),
             || self.target.q_values(nl.clone(), nd.clone(), ng.clone()),
@@ -398,12 +486,13 @@ impl Learner {
     /// The TD targets `y` of a batch (eq. 10), for tests and diagnostics.
     #[doc(alias = "eq10")]
     pub fn td_targets(&self, batch: &Batch) -> Vec<f32> {
-        if let Some((online, target)) = self.host_nets() {
+        if let Some((online, target)) = self.host_nets_for(batch) {
             let next = batch_inputs(batch, true);
             let (qo, qt) = rayon::join(|| online.q_values(&next), || target.q_values(&next));
             return host_targets(&qo, &qt, batch, self.gamma);
         }
-        self.targets(batch).into_data().try_to_vec::<f32>().unwrap_or_default()
+        let frames = self.device_frames(batch);
+        self.targets(batch, frames.as_ref()).into_data().try_to_vec::<f32>().unwrap_or_default()
     }
 
     /// The online (autodiff-free copy) and target networks for the host kernels, on `flex`
@@ -414,6 +503,12 @@ impl Learner {
         }
         let config = &self.net_config;
         Some((self.plain.host(config)?, self.target.host(config)?))
+    }
+
+    /// [`Learner::host_nets`] for `batch`: a batch of depth frames goes to burn's path,
+    /// which builds the stacks on the device.
+    fn host_nets_for(&self, batch: &Batch) -> Option<(HostNet, HostNet)> {
+        self.host_nets().filter(|_| batch.depth_frames.is_empty())
     }
 
     /// Whether gradient steps run on the host kernels (`mdrlat_nn::host`): on `flex`, unless
@@ -430,10 +525,11 @@ impl Learner {
 
     /// Q⁻(s', a) of the target network for every action, `[B][actions]` row-major.
     pub fn target_q_next(&self, batch: &Batch) -> Vec<f32> {
-        if let Some((_, target)) = self.host_nets() {
+        if let Some((_, target)) = self.host_nets_for(batch) {
             return target.q_values(&batch_inputs(batch, true));
         }
-        let (nl, nd, ng) = self.inputs::<false>(batch, true);
+        let frames = self.device_frames(batch);
+        let (nl, nd, ng) = self.inputs(batch, frames.as_ref(), true);
         self.target.q_values(nl, nd, ng).into_data().try_to_vec::<f32>().unwrap_or_default()
     }
 
@@ -450,10 +546,12 @@ impl Learner {
     /// Lines 10–11 (targets, no autodiff) and the online forward of line 12 (with autodiff):
     /// they do not depend on each other, so they run side by side.
     fn targets_and_forward(&self, batch: &Batch) -> (Tensor<2>, mdrlat_nn::QOutput) {
+        let frames = self.device_frames(batch);
+        let frames = frames.as_ref();
         self.both(
-            || self.targets(batch),
+            || self.targets(batch, frames),
             || {
-                let (l, d, g) = self.inputs::<true>(batch, false);
+                let (l, d, g) = with_autodiff(self.inputs(batch, frames, false));
                 self.online.forward(l, d, g)
             },
         )
@@ -477,7 +575,7 @@ impl Learner {
     /// One gradient step on a sampled batch (Algorithm 1, lines 7–15).
     pub fn update(&mut self, batch: &Batch) -> Losses {
         let t0 = std::time::Instant::now();
-        let losses = match self.host_nets() {
+        let losses = match self.host_nets_for(batch) {
             Some((online, target)) => self.host_update(online, &target, batch, t0),
             None => {
                 let (grads, losses, t1) = self.gradients(batch);
@@ -485,6 +583,8 @@ impl Learner {
                 let online = self.take_online();
                 self.online = self.optim.step(self.learning_rate, online, grads);
                 self.plain = self.online.valid();
+                // Read once the Adam step is queued too (a read waits for the device).
+                let losses = losses.read();
                 self.phase_ms = phase_ms([t0, t1, t2]);
                 losses
             }
@@ -556,10 +656,11 @@ impl Learner {
     /// Lines 7–14: the targets, the losses and their gradients. Every tensor of the autodiff
     /// graph is dropped on return, so the graph holds no parameter any more. The instant is
     /// the end of the forward phase.
-    fn gradients(&self, batch: &Batch) -> (GradientsParams, Losses, std::time::Instant) {
+    fn gradients(&self, batch: &Batch) -> (GradientsParams, PendingLosses, std::time::Instant) {
         let b = batch.size;
         let (y, out) = self.targets_and_forward(batch);
-        let y = Tensor::<2>::from_data(y.into_data(), &self.train_device);
+        // A constant of the graph, where it was computed (no round trip through the host).
+        let y = y.autodiff();
         let t1 = std::time::Instant::now();
 
         // Line 12, eq. (13): (y − Q(s, a))².
@@ -568,25 +669,25 @@ impl Learner {
             &self.train_device,
         );
         let q_sa = out.q.gather(1, actions); // [B, 1]
-        let q_mean = q_sa.clone().mean().into_scalar::<f32>();
+        let q_mean = q_sa.clone().inner().mean(); // [1]
         let td = (y - q_sa).square().mean(); // [1]
-        let td_value = td.clone().into_scalar::<f32>();
 
         // Lines 13–14, eq. (12): Σ over t−2..t of (v − ṽ)² + (ω − ω̃)².
-        let (loss, at_value) = match out.velocity {
+        let (loss, at) = match out.velocity {
             Some(v_hat) => {
                 let target = Tensor::<2>::from_data(
                     TensorData::new(batch.odom.clone(), [b, 2 * ODOM_HISTORY]),
                     &self.train_device,
                 );
                 let at = (target - v_hat).square().sum_dim(1).mean(); // [1]
-                let at_value = at.clone().into_scalar::<f32>();
-                (td + at * self.aux_weight, at_value)
+                (td.clone() + at.clone() * self.aux_weight, Some(at.inner()))
             }
-            None => (td, 0.0),
+            None => (td.clone(), None),
         };
         let grads = GradientsParams::from_grads(loss.backward(), &self.online);
-        (grads, Losses { td: td_value, at: at_value, q_mean }, t1)
+        let at = at.unwrap_or_else(|| Tensor::zeros([1], &self.device));
+        let losses = PendingLosses(Tensor::cat(vec![td.inner(), at, q_mean], 0));
+        (grads, losses, t1)
     }
 
     /// Lines 7–14 on the host kernels, up to the backward pass: the two eq. (10) forwards on
@@ -700,7 +801,8 @@ impl Learner {
     /// Forward and backward times of each stage of the online network on `batch`
     /// (with autodiff, as in a gradient step), milliseconds.
     pub fn stage_times(&self, batch: &Batch) -> Vec<mdrlat_nn::StageTime> {
-        let (l, d, g) = self.inputs::<true>(batch, false);
+        let frames = self.device_frames(batch);
+        let (l, d, g) = with_autodiff(self.inputs(batch, frames.as_ref(), false));
         self.online.stage_times(l, d, g, true)
     }
 
@@ -708,7 +810,7 @@ impl Learner {
     /// the online network over `batch` (as in a gradient step: the auxiliary head included,
     /// unit loss gradients), in forward order; `None` off the host kernels.
     pub fn host_stage_times(&self, batch: &Batch) -> Option<Vec<mdrlat_nn::StageTime>> {
-        let (online, _) = self.host_nets()?;
+        let (online, _) = self.host_nets_for(batch)?;
         let aux = self.variant.auxiliary_task();
         let tape = online.forward(&batch_inputs(batch, false), aux);
         let dq = vec![1.0 / batch.size.max(1) as f32; tape.q().len()];
@@ -729,5 +831,96 @@ impl Learner {
     /// The online network without autodiff (for evaluation and export).
     pub fn policy_net(&self) -> QNet {
         self.plain.clone()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::replay::{ReplayBuffer, Transition};
+    use mdrlat_core::DEPTH_LEN;
+
+    /// The stacks a learner builds on its device from a batch's frames are the replay's own
+    /// stacks, bit for bit — including millimetres above 32,767, which travel as negative
+    /// 16-bit integers.
+    #[test]
+    fn stacks_built_from_frames_on_the_device_are_the_replay_stacks() {
+        let metres = [0.0, 0.4, 1.234, 9.999, 32.767, 32.768, 50.0, 70.0, f32::NAN];
+        let mut replay = ReplayBuffer::new(8, 16, true, true);
+        let mut ids = Vec::new();
+        for f in 0..7 {
+            let depth: Vec<f32> =
+                (0..DEPTH_LEN).map(|j| metres[(j * 7 + f) % metres.len()]).collect();
+            ids.push(replay.push_frame(&[1.0; LASER_BEAMS], &depth));
+        }
+        for t in 0..3 {
+            let stack = |s: usize| std::array::from_fn(|k| ids[s + k]);
+            let odom = [0.0; 2 * ODOM_HISTORY];
+            replay.push(Transition {
+                obs: stack(t),
+                next: stack(t + 1),
+                action: 1,
+                reward: 0.5,
+                terminated: false,
+                odom,
+                goal: [0.0; 3],
+                next_goal: [0.0; 3],
+            });
+        }
+        let indices = [2, 0, 2, 1];
+        let (mut stacks, mut frames) = (Batch::default(), Batch::default());
+        replay.write_batch_as(&indices, &mut stacks, DepthLayout::Stacks);
+        replay.write_batch_as(&indices, &mut frames, DepthLayout::Frames);
+        assert_eq!(frames.depth_frames.len(), 7, "frames 0..=6, each once");
+
+        let config = TrainConfig { variant: Variant::Mdrlat, ..TrainConfig::default() };
+        let learner = Learner::new(&config, Task::Avoid, &Device::flex());
+        let on_device = learner.device_frames(&frames).expect("a batch of frames");
+        for (next, want) in [(false, &stacks.depth), (true, &stacks.next_depth)] {
+            let (_, depth, _) = learner.inputs(&frames, Some(&on_device), next);
+            let Some(mdrlat_nn::DepthInput::Stacks(depth)) = depth else {
+                panic!("frames give stacks");
+            };
+            assert_eq!(depth.dims(), [4, FRAME_STACK, DEPTH_ROWS, DEPTH_COLS]);
+            let got: Vec<u32> = depth
+                .into_data()
+                .try_to_vec::<f32>()
+                .expect("f32")
+                .iter()
+                .map(|v| v.to_bits())
+                .collect();
+            let want: Vec<u32> = want.iter().map(|v| v.to_bits()).collect();
+            assert!(got == want, "s{} differs", if next { "'" } else { "" });
+        }
+    }
+
+    /// On LibTorch (here its CPU), gradient steps on a batch of frames give the same bytes as
+    /// on the same batch of stacks (`cargo test --features tch`, with LibTorch set up).
+    #[cfg(feature = "tch")]
+    #[test]
+    #[allow(deprecated)] // burn-tch is deprecated upstream; it is our `tch` backend.
+    fn libtorch_steps_on_frames_equal_steps_on_stacks() {
+        let device = Device::libtorch();
+        let config = TrainConfig { variant: Variant::Mdrlat, ..TrainConfig::default() };
+        let replay = crate::bench::random_replay(Variant::Mdrlat, 12, 9);
+        let mut learners = [false, true].map(|_| Learner::new(&config, Task::Avoid, &device));
+        assert_eq!(learners[0].depth_layout(), DepthLayout::Frames);
+        let mut losses = [Vec::new(), Vec::new()];
+        for step in 0..3usize {
+            let indices: Vec<usize> = (0..6).map(|i| (i * 5 + step * 3) % 12).collect();
+            for (k, layout) in [DepthLayout::Stacks, DepthLayout::Frames].into_iter().enumerate() {
+                let mut batch = Batch::default();
+                replay.write_batch_as(&indices, &mut batch, layout);
+                losses[k].push(learners[k].update(&batch));
+            }
+        }
+        assert_eq!(losses[0], losses[1]);
+        let weights = |l: &Learner| {
+            let mut batch = Batch::default();
+            replay.write_batch_as(&[0, 7], &mut batch, DepthLayout::Stacks);
+            l.target_q_next(&batch).iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        };
+        learners.iter_mut().for_each(Learner::sync_target);
+        assert!(weights(&learners[0]) == weights(&learners[1]));
     }
 }

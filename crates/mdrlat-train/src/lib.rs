@@ -17,5 +17,5 @@ pub mod train;
 pub use config::{TrainConfig, TrainConfigError};
 pub use learner::{Inputs, Learner, Losses};
 pub use policy::{GreedyPolicy, observation_inputs};
-pub use replay::{Batch, ReplayBuffer, Transition};
+pub use replay::{Batch, DepthFrames, DepthLayout, ReplayBuffer, Transition};
 pub use train::{Evaluation, Status, TrainError, TrainReport, evaluate, train};

@@ -73,6 +73,52 @@ pub struct Batch {
     pub goal: Vec<f32>,
     /// `[B, 3]` normalised goal of `s_{t+1}`.
     pub next_goal: Vec<f32>,
+    /// The depth frames as stored, for a device that builds the stacks itself
+    /// ([`DepthLayout::Frames`]; `depth` and `next_depth` are then empty). Empty otherwise.
+    pub depth_frames: DepthFrames,
+}
+
+/// How a sampled batch carries its depth input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DepthLayout {
+    /// Normalised `f32` stacks, `[B, 4, 128, 160]` for `s` and for `s'` (`Batch::depth`,
+    /// `Batch::next_depth`).
+    #[default]
+    Stacks,
+    /// Each distinct frame of the batch once, in stored millimetres, and for each stack which
+    /// frames it holds (`Batch::depth_frames`): ~5 frames a row instead of 8, and 2 bytes a
+    /// value instead of 4. A GPU reads a third of the bytes and builds the stacks itself with
+    /// [`depth_table`], into the same values.
+    Frames,
+}
+
+/// A batch's depth frames in [`DepthLayout::Frames`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DepthFrames {
+    /// `[F, 128 × 160]`: the distinct frames of the batch, in millimetres as stored.
+    pub mm: Vec<u16>,
+    /// `[B, 4]`: the row of `mm` that is frame `k` (oldest first) of row `i`'s `s`.
+    pub obs: Vec<i64>,
+    /// `[B, 4]`: the same for `s'`.
+    pub next: Vec<i64>,
+}
+
+impl DepthFrames {
+    /// Distinct frames held.
+    pub fn len(&self) -> usize {
+        self.mm.len() / DEPTH_LEN
+    }
+
+    /// True when it holds no frame (a batch in [`DepthLayout::Stacks`]).
+    pub fn is_empty(&self) -> bool {
+        self.mm.is_empty()
+    }
+
+    fn clear(&mut self) {
+        self.mm.clear();
+        self.obs.clear();
+        self.next.clear();
+    }
 }
 
 /// The replay buffer.
@@ -127,6 +173,12 @@ impl NormTable {
 fn norm_tables() -> &'static (NormTable, NormTable) {
     static TABLES: std::sync::OnceLock<(NormTable, NormTable)> = std::sync::OnceLock::new();
     TABLES.get_or_init(|| (NormTable::new(normalize_laser), NormTable::new(normalize_depth)))
+}
+
+/// The network input of every stored depth value: entry `mm` is what a depth stack holds
+/// for a pixel stored as `mm` millimetres (see [`DepthLayout::Frames`]).
+pub fn depth_table() -> &'static [f32; 1 << 16] {
+    &norm_tables().1.0
 }
 
 impl ReplayBuffer {
@@ -252,7 +304,8 @@ impl ReplayBuffer {
         (0..batch).map(|_| rng.below(self.len())).collect()
     }
 
-    /// Writes the stacks of frames `ids` (oldest first), normalised, into `laser` / `depth`.
+    /// Writes the stacks of frames `ids` (oldest first), normalised, into `laser` / `depth`
+    /// (a sensor whose slice is empty is not written: not kept, or sent as frames).
     /// Frames also in `written` — `(ids, laser, depth)` of a stack already written, e.g. `s`
     /// when writing `s'`, which shares its three older frames — are copied from there
     /// instead of converted again (the same values: one stored frame).
@@ -263,6 +316,7 @@ impl ReplayBuffer {
         written: Option<(&[FrameId; FRAME_STACK], &[f32], &[f32])>,
     ) {
         let (laser_table, depth_table) = norm_tables();
+        let (keep_laser, keep_depth) = (!laser.is_empty(), !depth.is_empty());
         for (k, &id) in ids.iter().enumerate() {
             // Frame k's values (indexed only for a sensor the buffer keeps).
             let (l, d) =
@@ -270,20 +324,20 @@ impl ReplayBuffer {
             if let Some((done, done_l, done_d)) = written
                 && let Some(j) = done.iter().position(|&other| other == id)
             {
-                if self.keep_laser {
+                if keep_laser {
                     laser[l].copy_from_slice(&done_l[j * LASER_BEAMS..(j + 1) * LASER_BEAMS]);
                 }
-                if self.keep_depth {
+                if keep_depth {
                     depth[d].copy_from_slice(&done_d[j * DEPTH_LEN..(j + 1) * DEPTH_LEN]);
                 }
                 continue;
             }
             let s = self.slot(id);
-            if self.keep_laser {
+            if keep_laser {
                 laser_table
                     .write(&self.laser_mm[s * LASER_BEAMS..(s + 1) * LASER_BEAMS], &mut laser[l]);
             }
-            if self.keep_depth {
+            if keep_depth {
                 depth_table
                     .write(&self.depth_mm[s * DEPTH_LEN..(s + 1) * DEPTH_LEN], &mut depth[d]);
             }
@@ -293,10 +347,21 @@ impl ReplayBuffer {
     /// Fills `out` with the transitions at `indices`, normalised for the network. Buffers
     /// in `out` are reused.
     pub fn write_batch(&self, indices: &[usize], out: &mut Batch) {
+        self.write_batch_as(indices, out, DepthLayout::Stacks);
+    }
+
+    /// [`ReplayBuffer::write_batch`] with the depth input in `layout`.
+    pub fn write_batch_as(&self, indices: &[usize], out: &mut Batch, layout: DepthLayout) {
         let b = indices.len();
-        // Values a row of each sensor's stack (0 for a sensor the buffer does not keep).
+        let frames = layout == DepthLayout::Frames && self.keep_depth;
+        // Values a row of each sensor's stack (0 for a sensor the buffer does not keep, or
+        // whose frames go as they are).
         let ls = if self.keep_laser { FRAME_STACK * LASER_BEAMS } else { 0 };
-        let ds = if self.keep_depth { FRAME_STACK * DEPTH_LEN } else { 0 };
+        let ds = if self.keep_depth && !frames { FRAME_STACK * DEPTH_LEN } else { 0 };
+        out.depth_frames.clear();
+        if frames {
+            self.write_depth_frames(indices, &mut out.depth_frames);
+        }
         out.size = b;
         for (v, n) in [
             (&mut out.laser, ls),
@@ -334,6 +399,33 @@ impl ReplayBuffer {
                 out.next_goal.extend_from_slice(&normalize_goal(&t.next_goal));
             }
         }
+    }
+}
+
+impl ReplayBuffer {
+    /// The depth frames of the transitions at `indices` in [`DepthLayout::Frames`]: each
+    /// distinct frame once, in order of first use (`s` before `s'`, row by row).
+    fn write_depth_frames(&self, indices: &[usize], out: &mut DepthFrames) {
+        let mut ids: Vec<FrameId> = Vec::with_capacity(indices.len() * 2 * FRAME_STACK);
+        let mut row_of = std::collections::HashMap::with_capacity(ids.capacity());
+        for &i in indices {
+            let t = &self.transitions[i];
+            for (stack, &id) in std::iter::repeat_n(false, FRAME_STACK)
+                .chain(std::iter::repeat_n(true, FRAME_STACK))
+                .zip(t.obs.iter().chain(&t.next))
+            {
+                let row = *row_of.entry(id).or_insert_with(|| {
+                    ids.push(id);
+                    ids.len() as i64 - 1
+                });
+                if stack { out.next.push(row) } else { out.obs.push(row) }
+            }
+        }
+        out.mm.resize(ids.len() * DEPTH_LEN, 0);
+        out.mm.par_chunks_mut(DEPTH_LEN).zip(&ids).for_each(|(frame, &id)| {
+            let s = self.slot(id);
+            frame.copy_from_slice(&self.depth_mm[s * DEPTH_LEN..(s + 1) * DEPTH_LEN]);
+        });
     }
 }
 

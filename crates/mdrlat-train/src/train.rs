@@ -395,7 +395,7 @@ pub fn train(
         // Lines 6–15: one gradient step on a random batch.
         if replay.len() as u64 >= config.learning_starts && t % config.train_frequency == 0 {
             let idx = replay.sample_indices(config.batch_size, &mut run.sample_rng);
-            replay.write_batch(&idx, &mut batch);
+            replay.write_batch_as(&idx, &mut batch, learner.depth_layout());
             let losses = learner.update(&batch);
             status.losses = losses;
             run.window.td += f64::from(losses.td);

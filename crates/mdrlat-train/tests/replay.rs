@@ -5,7 +5,7 @@ use mdrlat_core::{
     Action, DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Rng, normalize_depth, normalize_laser,
 };
 use mdrlat_sim::{Env, Observation, SimConfig};
-use mdrlat_train::replay::{Batch, FrameId, ReplayBuffer, Transition};
+use mdrlat_train::replay::{Batch, DepthLayout, FrameId, ReplayBuffer, Transition};
 
 fn stacked(obs: &Observation) -> (Vec<f32>, Vec<f32>) {
     let mut l = vec![0.0; FRAME_STACK * LASER_BEAMS];
@@ -111,6 +111,41 @@ fn sampled_transitions_equal(keep_laser: bool, keep_depth: bool) {
         assert_eq!(batch.rewards[row], e.5);
         assert_eq!(batch.terminated[row] == 1.0, e.6);
     }
+
+    // The same rows with the depth as frames (what a LibTorch learner asks for): rebuilt
+    // through the depth table, the stacks hold the same values, bit for bit; each frame is
+    // sent once (consecutive transitions share seven of their eight); nothing else changes.
+    let mut frames = Batch::default();
+    buf.write_batch_as(&all, &mut frames, DepthLayout::Frames);
+    let f = &frames.depth_frames;
+    if keep_depth {
+        assert!(frames.depth.is_empty() && frames.next_depth.is_empty());
+        let table = mdrlat_train::replay::depth_table();
+        for (rows, stacks) in [(&f.obs, &batch.depth), (&f.next, &batch.next_depth)] {
+            assert_eq!(rows.len(), n * FRAME_STACK);
+            let rebuilt: Vec<u32> = rows
+                .iter()
+                .flat_map(|&r| {
+                    let r = usize::try_from(r).expect("a row");
+                    f.mm[r * DEPTH_LEN..(r + 1) * DEPTH_LEN]
+                        .iter()
+                        .map(|&mm| table[usize::from(mm)].to_bits())
+                })
+                .collect();
+            let want: Vec<u32> = stacks.iter().map(|v| v.to_bits()).collect();
+            assert!(rebuilt == want, "depth rebuilt from frames differs");
+        }
+        assert!(f.len() < 2 * n, "{} frames sent for {n} transitions", f.len());
+    } else {
+        assert!(f.is_empty());
+    }
+    let without_depth = |b: &Batch| Batch {
+        depth: vec![],
+        next_depth: vec![],
+        depth_frames: Default::default(),
+        ..b.clone()
+    };
+    assert_eq!(without_depth(&frames), without_depth(&batch));
 }
 
 #[test]
