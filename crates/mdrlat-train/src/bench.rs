@@ -33,16 +33,18 @@ pub fn random_batch(variant: Variant, size: usize, seed: u64) -> Batch {
 }
 
 /// A random batch for `learner`'s gradient steps: [`random_batch`], or where the learner takes
-/// its depth input as frames ([`Learner::depth_layout`]), `size` transitions of one episode
-/// of random frames ([`random_replay`]) in that layout, as a training run sends them.
+/// its depth input as frames ([`Learner::depth_layout`]), `size` transitions drawn at random
+/// from eight times as many of one episode of random frames ([`random_replay`]), in that
+/// layout: like a training run's batches, they share few frames (~5 distinct a row).
 pub fn learner_batch(learner: &Learner, size: usize, seed: u64) -> Batch {
     let variant = learner.variant();
     match learner.depth_layout() {
         DepthLayout::Stacks => random_batch(variant, size, seed),
         layout => {
-            let replay = random_replay(variant, size, seed);
+            let replay = random_replay(variant, 8 * size.max(1), seed);
+            let indices = replay.sample_indices(size, &mut Rng::seed_from_u64(seed + 1));
             let mut out = Batch::default();
-            replay.write_batch_as(&(0..size).collect::<Vec<_>>(), &mut out, layout);
+            replay.write_batch_as(&indices, &mut out, layout);
             out
         }
     }

@@ -18,4 +18,4 @@ pub use config::{TrainConfig, TrainConfigError};
 pub use learner::{Inputs, Learner, Losses};
 pub use policy::{GreedyPolicy, observation_inputs};
 pub use replay::{Batch, DepthFrames, DepthLayout, ReplayBuffer, Transition};
-pub use train::{Evaluation, Status, TrainError, TrainReport, evaluate, train};
+pub use train::{Evaluation, Status, Timing, TrainError, TrainReport, evaluate, train};

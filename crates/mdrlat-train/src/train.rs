@@ -139,6 +139,54 @@ pub struct TrainReport {
     pub evaluations: Vec<Evaluation>,
     /// Wall time, seconds.
     pub seconds: f64,
+    /// Where that time went.
+    pub timing: Timing,
+}
+
+/// Where a training session's wall time went, seconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Timing {
+    /// Greedy decisions of ε-greedy (Algorithm 1, line 3).
+    pub acting: f64,
+    /// Environment steps (line 4).
+    pub env: f64,
+    /// Storing transitions, and the resets of episodes that ended (line 5).
+    pub storing: f64,
+    /// Sampling batches from the replay buffer (line 6).
+    pub sampling: f64,
+    /// Gradient steps and target syncs (lines 7–18).
+    pub learning: f64,
+    /// Greedy evaluations.
+    pub evaluation: f64,
+    /// Metrics, TensorBoard events, checkpoints, progress.
+    pub output: f64,
+}
+
+impl Timing {
+    /// The parts, named, in loop order.
+    pub fn parts(&self) -> [(&'static str, f64); 7] {
+        [
+            ("acting", self.acting),
+            ("env", self.env),
+            ("storing", self.storing),
+            ("sampling", self.sampling),
+            ("learning", self.learning),
+            ("evaluation", self.evaluation),
+            ("output", self.output),
+        ]
+    }
+}
+
+/// Seconds since the last split: a stopwatch for [`Timing`].
+struct Lap(Instant);
+
+impl Lap {
+    fn split(&mut self) -> f64 {
+        let now = Instant::now();
+        let s = (now - self.0).as_secs_f64();
+        self.0 = now;
+        s
+    }
 }
 
 fn odom_of(obs: &Observation) -> [f32; 2 * ODOM_HISTORY] {
@@ -341,8 +389,15 @@ pub fn train(
     let mut inputs = Inputs::default();
     let mut batch = Batch::default();
     let mut status = Status { step: run.step, episodes: run.episodes, ..Status::default() };
-    let mut report =
-        TrainReport { steps: 0, updates: 0, episodes: 0, evaluations: Vec::new(), seconds: 0.0 };
+    let mut report = TrainReport {
+        steps: 0,
+        updates: 0,
+        episodes: 0,
+        evaluations: Vec::new(),
+        seconds: 0.0,
+        timing: Timing::default(),
+    };
+    let (mut lap, mut timing) = (Lap(Instant::now()), Timing::default());
 
     // Algorithm 1, line 2.
     for t in run.step + 1..=config.total_steps {
@@ -357,10 +412,12 @@ pub fn train(
                 learner.greedy(&inputs).map_err(|source| TrainError::Policy { step: t, source })?;
             greedy[0].index()
         };
+        timing.acting += lap.split();
         let (odom, goal) = (odom_of(env.observation()), goal_of(env.observation()));
         // Line 4: execute a_k, observe r_k and s_{k+1}.
         let s =
             env.step(Action::new(action).unwrap_or_else(|| unreachable!("action index < 10")))?;
+        timing.env += lap.split();
         let (reward, terminated, done) = (s.reward, s.terminated, s.terminated || s.truncated);
         // Line 5: store (s_k, a_k, r_k, s_{k+1}); s_{k+1} is the true final observation at an
         // episode's end, and only a collision or the goal (terminated) marks it terminal.
@@ -391,11 +448,13 @@ pub fn train(
         } else {
             run.stack = next;
         }
+        timing.storing += lap.split();
 
         // Lines 6–15: one gradient step on a random batch.
         if replay.len() as u64 >= config.learning_starts && t % config.train_frequency == 0 {
             let idx = replay.sample_indices(config.batch_size, &mut run.sample_rng);
             replay.write_batch_as(&idx, &mut batch, learner.depth_layout());
+            timing.sampling += lap.split();
             let losses = learner.update(&batch);
             status.losses = losses;
             run.window.td += f64::from(losses.td);
@@ -407,6 +466,7 @@ pub fn train(
         if t % config.target_update_interval == 0 {
             learner.sync_target();
         }
+        timing.learning += lap.split();
 
         if t % LOG_INTERVAL == 0 || t == config.total_steps {
             let w = run.window;
@@ -443,6 +503,7 @@ pub fn train(
                 run.window = Window::default();
             }
         }
+        timing.output += lap.split();
         if t % config.eval_interval == 0 {
             let e = evaluate(&mut eval_envs, &learner, config, t)?;
             let mean_len = e.lengths.iter().map(|&l| f64::from(l)).sum::<f64>()
@@ -470,6 +531,7 @@ pub fn train(
             status.last_eval = Some(e.mean());
             report.evaluations.push(e);
         }
+        timing.evaluation += lap.split();
         // A checkpoint every interval and at the end, so a finished run can be extended.
         if t % config.checkpoint_interval == 0 || t == config.total_steps {
             events.flush().map_err(|e| tb_err(&events, e))?;
@@ -484,6 +546,7 @@ pub fn train(
         status.epsilon = epsilon;
         status.episodes = run.episodes;
         progress(&status);
+        timing.output += lap.split();
     }
     metrics.flush()?;
     evals_csv.flush()?;
@@ -492,6 +555,7 @@ pub fn train(
     report.updates = learner.updates();
     report.episodes = run.episodes;
     report.seconds = started.elapsed().as_secs_f64();
+    report.timing = timing;
     Ok((report, learner))
 }
 

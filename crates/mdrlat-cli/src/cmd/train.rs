@@ -242,6 +242,14 @@ pub fn run(a: &Args) -> Result<()> {
         report.seconds,
         last.unwrap_or_else(|| "none this session".into())
     );
+    let total_s = report.timing.parts().iter().map(|(_, s)| s).sum::<f64>().max(1e-9);
+    let parts: Vec<String> = report
+        .timing
+        .parts()
+        .iter()
+        .map(|(name, s)| format!("{name} {s:.1} s ({:.0}%)", 100.0 * s / total_s))
+        .collect();
+    out!("where the time went: {}", parts.join(", "));
     out!(
         "wrote {0}/config.toml, run.toml, metrics.csv, eval.csv, events.out.tfevents.*, checkpoint/, model.safetensors",
         dir.display()
