@@ -24,7 +24,7 @@ mod variant;
 
 pub use net::{
     DepthInput, QNet, QNetConfig, QOutput, StageTime, bilinear, depth_input, depth_patches,
-    dueling, is_flex, is_libtorch, prefers_depth_patches,
+    dueling, is_flex, is_libtorch, is_libtorch_gpu, prefers_depth_patches,
 };
 pub use variant::{Variant, VariantParseError};
 

@@ -262,6 +262,23 @@ pub fn is_libtorch(device: &Device) -> bool {
     }
 }
 
+/// Whether `device` is a LibTorch GPU (CUDA, MPS, Vulkan; always false without `tch`).
+#[allow(deprecated)] // burn-tch is deprecated upstream; it is our `tch` backend.
+pub fn is_libtorch_gpu(device: &Device) -> bool {
+    #[cfg(feature = "tch")]
+    {
+        matches!(
+            device.clone().inner().as_dispatch(),
+            burn::backend::DispatchDevice::LibTorch(d) if *d != burn::backend::libtorch::LibTorchDevice::Cpu
+        )
+    }
+    #[cfg(not(feature = "tch"))]
+    {
+        let _ = device;
+        false
+    }
+}
+
 /// Whether the depth stream's first layer should be fed patches cut on the host (burn's
 /// `flex` CPU backend, whose direct convolution is slow) rather than the stacks themselves
 /// (LibTorch and the GPUs convolve well, and patches are 2.2× the bytes to move).
@@ -592,5 +609,22 @@ mod tests {
         assert!(!prefers_depth_patches(&dev) && !prefers_depth_patches(&dev.clone().autodiff()));
         let input = depth_input(&vec![0.5; 4 * 128 * 160], 1, 128, 160, &dev);
         assert!(matches!(&input, DepthInput::Stacks(s) if s.dims() == [1, 4, 128, 160]));
+    }
+
+    /// Which devices are LibTorch's, and which of those a GPU (naming a CUDA device needs
+    /// no GPU).
+    #[cfg(feature = "tch")]
+    #[test]
+    #[allow(deprecated)] // burn-tch is deprecated upstream; it is our `tch` backend.
+    fn libtorch_devices_are_told_apart() {
+        let (cpu, gpu) = (Device::libtorch(), Device::libtorch_cuda(0));
+        assert!(is_libtorch(&cpu) && is_libtorch(&gpu) && is_libtorch(&gpu.clone().autodiff()));
+        assert!(!is_libtorch_gpu(&cpu) && is_libtorch_gpu(&gpu));
+        assert!(!is_libtorch(&Device::flex()) && !is_libtorch_gpu(&Device::flex()));
+    }
+
+    #[test]
+    fn flex_is_not_libtorch() {
+        assert!(!is_libtorch(&Device::flex()) && !is_libtorch_gpu(&Device::flex().autodiff()));
     }
 }

@@ -30,10 +30,10 @@ pub enum DeviceKind {
 }
 
 impl DeviceKind {
-    /// The burn device.
+    /// The burn device, the process readied for it (`mdrlat_train::prepare_device`).
     #[allow(deprecated)] // burn-tch is deprecated upstream; it is our `tch` backend.
     pub fn device(self) -> Device {
-        match self {
+        let device = match self {
             DeviceKind::Cpu => Device::flex(),
             #[cfg(feature = "wgpu")]
             DeviceKind::Wgpu => Device::wgpu(mdrlat_nn::burn::tensor::DeviceKind::DefaultDevice),
@@ -43,7 +43,9 @@ impl DeviceKind {
             DeviceKind::TchCuda => Device::libtorch_cuda(0),
             #[cfg(feature = "cuda")]
             DeviceKind::Cuda => Device::cuda(0),
-        }
+        };
+        mdrlat_train::prepare_device(&device);
+        device
     }
 
     /// The name used on the command line and in `run.toml`.
