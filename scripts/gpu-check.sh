@@ -76,7 +76,8 @@ long_run() { # label binary-wrapper...
   kill -TERM "$pid" 2>/dev/null
   wait "$pid"
   cp "$run/metrics.csv" "$OUT/${label}long-metrics.csv"
-  cp "$run/eval.csv" "$OUT/${label}long-eval.csv"
+  # Only with an evaluation in it (the device tool brings back a limited number of files).
+  if [ "$(wc -l <"$run/eval.csv")" -gt 1 ]; then cp "$run/eval.csv" "$OUT/${label}long-eval.csv"; fi
 }
 
 # Same seed, same 400 steps (300 gradient steps), on cpu and on the GPU: the losses of
