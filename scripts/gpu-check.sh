@@ -9,8 +9,9 @@
 #     LONG_SECONDS=240 bash scripts/gpu-check.sh
 #
 # With MDRLAT_TCH_BASE=<an earlier tch binary>, it also measures that one beside this one, in
-# the same lease: MDRLAT's `bench train` alternately (base-*.jsonl), `--profile` of each, and a
-# real run of LONG_SECONDS each (base-progress.csv beside progress.csv).
+# the same lease: MDRLAT's `bench train` alternately (base-bench-*.jsonl beside
+# side-bench-*.jsonl), `--profile` of each, and a real run of LONG_SECONDS each
+# (base-progress.csv beside progress.csv). Keep LONG_SECONDS near 100 then: the runs double.
 #
 # `--device tch-cuda` needs a binary built with `--features tch` against the LibTorch of the
 # machine's own PyTorch, same version, with libtorch_cuda in the folder it was linked against
@@ -59,7 +60,7 @@ BASE_RUN=("${TCH_ENV[@]}" "$BASE")
 # go to $OUT/<label>long-metrics.csv and long-eval.csv, the step it had reached every 10 s to
 # $OUT/<label>progress.csv.
 long_run() { # label binary-wrapper...
-  local label=$1 run="$RUNS/long-$1"
+  local label=$1 run="$RUNS/${1}long" step
   shift
   # A background job of a script ignores SIGINT, and `mdrlat train` has no handler: TERM,
   # through `timeout` (which passes it on), with a bound in case this loop is cut short.
@@ -75,9 +76,11 @@ long_run() { # label binary-wrapper...
   done
   kill -TERM "$pid" 2>/dev/null
   wait "$pid"
-  cp "$run/metrics.csv" "$OUT/${label}long-metrics.csv"
+  [ -f "$run/metrics.csv" ] && cp "$run/metrics.csv" "$OUT/${label}long-metrics.csv"
   # Only with an evaluation in it (the device tool brings back a limited number of files).
-  if [ "$(wc -l <"$run/eval.csv")" -gt 1 ]; then cp "$run/eval.csv" "$OUT/${label}long-eval.csv"; fi
+  if [ -f "$run/eval.csv" ] && [ "$(wc -l <"$run/eval.csv")" -gt 1 ]; then
+    cp "$run/eval.csv" "$OUT/${label}long-eval.csv"
+  fi
 }
 
 # Same seed, same 400 steps (300 gradient steps), on cpu and on the GPU: the losses of
@@ -114,7 +117,7 @@ if [ -n "$TCH" ] && [ -x "$TCH" ]; then
         timeout 60 "${BASE_RUN[@]}" bench train --device tch-cuda --variants mdrlat --seconds 2 --json |
           grep '"bench":"train"' | tee -a "$OUT/base-bench-tch-cuda.jsonl"
         timeout 60 "${TCH_RUN[@]}" bench train --device tch-cuda --variants mdrlat --seconds 2 --json |
-          grep '"bench":"train"' | tee -a "$OUT/bench-tch-cuda.jsonl"
+          grep '"bench":"train"' | tee -a "$OUT/side-bench-tch-cuda.jsonl"
       done
       stage "the base binary: where an MDRLAT step goes"
       timeout 60 "${BASE_RUN[@]}" bench train --device tch-cuda --variants mdrlat --profile --seconds 1

@@ -9,8 +9,9 @@
 //!
 //! It writes in place only where that is safe and possible: on the CPU backends (`flex`, and
 //! LibTorch on the CPU), for contiguous `f32` tensors whose memory nothing else holds; on a
-//! LibTorch GPU, the same arithmetic runs in place as LibTorch's own element-wise kernels.
-//! Every other case — the first step (the moments do not exist yet), a `wgpu` device, a
+//! LibTorch GPU, the same arithmetic runs in place as LibTorch's own element-wise kernels
+//! (without the host pass's flush of subnormal moments to 0: as burn's Adam). Every other
+//! case — the first step (the moments do not exist yet), a CubeCL device (`wgpu`, `cuda`), a
 //! parameter whose weights another network still shares, a strided gradient on the CPU — goes
 //! to burn's `Adam`, with the same state. The state *is* burn's [`AdamState`], so `optimizer.bpk` files are the same
 //! whichever of the two paths wrote them.
@@ -206,7 +207,8 @@ fn make_contiguous(kind: &mut DispatchTensorKind) {
 mod libtorch {
     //! LibTorch tensors on the CPU, seen as slices: the workspace's only `unsafe` code. tch
     //! offers no safe view of a tensor's memory, and copying it out and back would cost more
-    //! than the fused pass saves.
+    //! than the fused pass saves. And the in-place step on LibTorch's GPUs, in its own
+    //! kernels (safe code).
     use mdrlat_nn::burn::backend::libtorch::TchTensor;
 
     pub(super) fn make_contiguous(t: &mut TchTensor) {

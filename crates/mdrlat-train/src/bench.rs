@@ -257,8 +257,8 @@ pub fn replay_bytes(variant: Variant, capacity: usize) -> usize {
 }
 
 /// Median milliseconds of sampling a batch of `batch` transitions from a replay buffer of
-/// 2,000 (random frames, one long episode): the frame lookups, u16 → f32 and normalisation
-/// that every gradient step starts with.
+/// 2,000 (random frames, one long episode) in `layout`: the frame lookups, and for stacks the
+/// u16 → f32 normalisation, that every gradient step starts with.
 pub fn sample_ms(variant: Variant, batch: usize, layout: DepthLayout, min_time: Duration) -> f64 {
     let replay = random_replay(variant, 2_000, 4);
     let mut rng = Rng::seed_from_u64(5);
@@ -350,8 +350,10 @@ pub fn profile(
         out.push((depth.into(), ms));
     }
     out.push(("target forwards (eq. 10, 2 passes; side by side on flex)".into(), targets));
+    // On a GPU the first two phases only queue their work; the third's loss read waits for it.
+    let queued = if mdrlat_nn::is_libtorch_gpu(device) { ", queued" } else { "" };
     out.push((
-        "step phase 1: targets + online forward (side by side on flex)".into(),
+        format!("step phase 1: targets + online forward (side by side on flex{queued})"),
         median(&mut p0),
     ));
     let (two, three) = if learner.uses_host_kernels() {
@@ -364,10 +366,11 @@ pub fn profile(
         )
     } else {
         (
-            "step phase 2: losses and backward".to_string(),
+            format!("step phase 2: losses and backward{queued}"),
             format!(
                 "step phase 3: Adam ({share:.0}% of parameter updates fused) + plain copy + \
-                 reading the losses"
+                 reading the losses{}",
+                if queued.is_empty() { "" } else { ", which waits for the step" }
             ),
         )
     };

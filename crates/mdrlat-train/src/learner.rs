@@ -36,7 +36,8 @@ struct PendingLosses(Tensor<1>);
 
 impl PendingLosses {
     fn read(self) -> Losses {
-        let v = self.0.into_data().try_to_vec::<f32>().unwrap_or_default();
+        let data = self.0.into_data().convert_dtype(mdrlat_nn::burn::tensor::DType::F32);
+        let v = data.try_to_vec::<f32>().unwrap_or_default();
         let at = |i: usize| v.get(i).copied().unwrap_or(f32::NAN);
         Losses { td: at(0), at: at(1), q_mean: at(2) }
     }
@@ -388,7 +389,8 @@ impl Learner {
     }
 
     /// Puts a batch's depth inputs of `s` and `s'` on the device as a gradient step does
-    /// (for `bench train --profile`).
+    /// (for `bench train --profile`; on a GPU it returns once the host's copies and the
+    /// transfer are done, before the kernels that build the stacks have run).
     pub fn depth_to_device(&self, batch: &Batch) {
         let frames = self.device_frames(batch);
         for next in [false, true] {
@@ -558,16 +560,19 @@ impl Learner {
     }
 
     /// Milliseconds of the last gradient step's three phases: targets beside the online
-    /// forward (lines 10–12), the losses and backward pass, the Adam step (line 15). On the
-    /// host kernels the second phase is the heads' backward, the third the rest of the
-    /// backward beside the heads' and the fusion's Adam steps, then the streams' Adam step.
+    /// forward (lines 10–12), the losses and backward pass, the Adam step (line 15) and the
+    /// read of the losses. On the host kernels the second phase is the heads' backward, the
+    /// third the rest of the backward beside the heads' and the fusion's Adam steps, then the
+    /// streams' Adam step. On a GPU the first two are the time to queue their work, and the
+    /// third waits, in the read, for the whole step.
     pub fn phase_times(&self) -> [f64; 3] {
         self.phase_ms
     }
 
     /// Parameter updates of the Adam steps so far: `(fused, through burn's Adam)`. On the CPU
-    /// backends every step after the first is fused, except the one after each target sync
-    /// (the target then shares the online weights, which must not change under it).
+    /// backends and LibTorch GPUs every step after the first is fused (in place), except the
+    /// one after each target sync (the target then shares the online weights, which must not
+    /// change under it).
     pub fn adam_paths(&self) -> (u64, u64) {
         (self.adam_counts.fused(), self.adam_counts.fallback())
     }
@@ -655,7 +660,7 @@ impl Learner {
 
     /// Lines 7–14: the targets, the losses and their gradients. Every tensor of the autodiff
     /// graph is dropped on return, so the graph holds no parameter any more. The instant is
-    /// the end of the forward phase.
+    /// the end of the forward phase (on a GPU: of queueing it).
     fn gradients(&self, batch: &Batch) -> (GradientsParams, PendingLosses, std::time::Instant) {
         let b = batch.size;
         let (y, out) = self.targets_and_forward(batch);
@@ -843,30 +848,39 @@ mod tests {
     /// The stacks a learner builds on its device from a batch's frames are the replay's own
     /// stacks, bit for bit — including millimetres above 32,767, which travel as negative
     /// 16-bit integers.
-    #[test]
-    fn stacks_built_from_frames_on_the_device_are_the_replay_stacks() {
+    /// `n` transitions of one episode whose depth frames cycle through values from 0 to beyond
+    /// 65.535 m (stored 65,535 mm) and NaN (stored 0), frame `f`'s pixel `j` reading value
+    /// `(7j + f) mod 9`.
+    fn replay_with_far_depths(n: usize) -> ReplayBuffer {
         let metres = [0.0, 0.4, 1.234, 9.999, 32.767, 32.768, 50.0, 70.0, f32::NAN];
-        let mut replay = ReplayBuffer::new(8, 16, true, true);
-        let mut ids = Vec::new();
-        for f in 0..7 {
-            let depth: Vec<f32> =
-                (0..DEPTH_LEN).map(|j| metres[(j * 7 + f) % metres.len()]).collect();
-            ids.push(replay.push_frame(&[1.0; LASER_BEAMS], &depth));
-        }
-        for t in 0..3 {
+        let mut replay = ReplayBuffer::new(n, n + 8, true, true);
+        let ids: Vec<_> = (0..n + FRAME_STACK)
+            .map(|f| {
+                let depth: Vec<f32> =
+                    (0..DEPTH_LEN).map(|j| metres[(j * 7 + f) % metres.len()]).collect();
+                let laser = [0.5 + f as f32 * 0.1; LASER_BEAMS];
+                replay.push_frame(&laser, &depth)
+            })
+            .collect();
+        for t in 0..n {
             let stack = |s: usize| std::array::from_fn(|k| ids[s + k]);
-            let odom = [0.0; 2 * ODOM_HISTORY];
             replay.push(Transition {
                 obs: stack(t),
                 next: stack(t + 1),
-                action: 1,
-                reward: 0.5,
-                terminated: false,
-                odom,
+                action: (t % 10) as u8,
+                reward: 0.5 - t as f32 * 0.1,
+                terminated: t % 5 == 4,
+                odom: std::array::from_fn(|k| 0.1 * k as f32),
                 goal: [0.0; 3],
                 next_goal: [0.0; 3],
             });
         }
+        replay
+    }
+
+    #[test]
+    fn stacks_built_from_frames_on_the_device_are_the_replay_stacks() {
+        let replay = replay_with_far_depths(3);
         let indices = [2, 0, 2, 1];
         let (mut stacks, mut frames) = (Batch::default(), Batch::default());
         replay.write_batch_as(&indices, &mut stacks, DepthLayout::Stacks);
@@ -895,14 +909,15 @@ mod tests {
     }
 
     /// On LibTorch (here its CPU), gradient steps on a batch of frames give the same bytes as
-    /// on the same batch of stacks (`cargo test --features tch`, with LibTorch set up).
+    /// on the same batch of stacks, millimetres above 32,767 included (`cargo test --features
+    /// tch`, with LibTorch set up).
     #[cfg(feature = "tch")]
     #[test]
     #[allow(deprecated)] // burn-tch is deprecated upstream; it is our `tch` backend.
     fn libtorch_steps_on_frames_equal_steps_on_stacks() {
         let device = Device::libtorch();
         let config = TrainConfig { variant: Variant::Mdrlat, ..TrainConfig::default() };
-        let replay = crate::bench::random_replay(Variant::Mdrlat, 12, 9);
+        let replay = replay_with_far_depths(12);
         let mut learners = [false, true].map(|_| Learner::new(&config, Task::Avoid, &device));
         assert_eq!(learners[0].depth_layout(), DepthLayout::Frames);
         let mut losses = [Vec::new(), Vec::new()];

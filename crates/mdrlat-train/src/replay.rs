@@ -88,7 +88,9 @@ pub enum DepthLayout {
     /// Each distinct frame of the batch once, in stored millimetres, and for each stack which
     /// frames it holds (`Batch::depth_frames`): ~5 frames a row instead of 8, and 2 bytes a
     /// value instead of 4. A GPU reads a third of the bytes and builds the stacks itself with
-    /// [`depth_table`], into the same values.
+    /// [`depth_table`], into the same values. (A learner on `flex` given such a batch convolves
+    /// those stacks directly, not through the patches it cuts from a batch of stacks: the
+    /// same values, other last bits; `Learner::depth_layout` never asks for it there.)
     Frames,
 }
 
