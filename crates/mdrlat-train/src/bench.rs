@@ -4,7 +4,7 @@
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner};
 use crate::replay::{Batch, DepthLayout, ReplayBuffer, Transition};
-use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Rng};
+use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Observation, Rng};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::config::Task;
@@ -190,21 +190,11 @@ pub fn policy_batch_ms(
     threads: usize,
     min_time: Duration,
 ) -> (f64, f64) {
-    use mdrlat_core::{Observation, Policy};
+    use mdrlat_core::Policy;
     let mut policy = crate::GreedyPolicy::untrained(variant, Task::Avoid, 0, device, threads)
         .expect("inference thread pool")
         .with_forward_batch(forward_batch);
-    let mut rng = Rng::seed_from_u64(6);
-    let obs: Vec<Observation> = (0..observations)
-        .map(|_| {
-            let mut o = Observation::zeros();
-            for _ in 0..FRAME_STACK {
-                o.laser.push_slot().iter_mut().for_each(|r| *r = rng.range_f32(0.2, 5.6));
-                o.depth.push_slot().iter_mut().for_each(|d| *d = rng.range_f32(0.4, 9.0));
-            }
-            o
-        })
-        .collect();
+    let obs = random_observations(observations, 6);
     let batch: Vec<&Observation> = obs.iter().collect();
     let slots: Vec<usize> = (0..observations).collect();
     let mut actions = Vec::new();
@@ -213,6 +203,67 @@ pub fn policy_batch_ms(
     });
     let flop = mdrlat_nn::QNetConfig::new(variant).decision_flops() as f64 * observations as f64;
     (ms, flop / (ms * 1e-3) / 1e9)
+}
+
+/// `n` random observations (laser 0.2–5.6 m, depth 0.4–9 m) for the decision benchmarks.
+fn random_observations(n: usize, seed: u64) -> Vec<Observation> {
+    let mut rng = Rng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| {
+            let mut o = Observation::zeros();
+            for _ in 0..FRAME_STACK {
+                o.laser.push_slot().iter_mut().for_each(|r| *r = rng.range_f32(0.2, 5.6));
+                o.depth.push_slot().iter_mut().for_each(|d| *d = rng.range_f32(0.4, 9.0));
+            }
+            o
+        })
+        .collect()
+}
+
+/// Median milliseconds of making the network inputs of `observations` random observations
+/// of `variant` on one thread ([`crate::observation_inputs`]: each observation's frames,
+/// normalised, into the batch's stacks): the part of a batched decision before any forward.
+pub fn observation_inputs_ms(variant: Variant, observations: usize, min_time: Duration) -> f64 {
+    let obs = random_observations(observations, 6);
+    let batch: Vec<&Observation> = obs.iter().collect();
+    let config = mdrlat_nn::QNetConfig::new(variant);
+    let mut inputs = Inputs::default();
+    median_ms(min_time, || {
+        let _ = crate::observation_inputs(&batch, &config, &mut inputs);
+    })
+    .0
+}
+
+/// Median milliseconds of each stage of one forward pass of `rows` random observations of
+/// a fresh `variant` network on the host kernels, all on the calling thread (as each of a
+/// batched decision's forwards runs), in forward order; empty where the host kernels do not
+/// run (never on `flex`).
+pub fn forward_stages_ms(
+    variant: Variant,
+    rows: usize,
+    min_time: Duration,
+) -> Vec<(&'static str, f64)> {
+    let config = mdrlat_nn::QNetConfig::new(variant);
+    let Some(host) = config.init_seeded(&Device::flex(), 0).host(&config) else {
+        return Vec::new();
+    };
+    let host = host.on_calling_thread();
+    let obs = random_observations(rows, 6);
+    let batch: Vec<&Observation> = obs.iter().collect();
+    let mut inputs = Inputs::default();
+    if crate::observation_inputs(&batch, &config, &mut inputs).is_err() {
+        return Vec::new();
+    }
+    let mut samples: Vec<Vec<(&'static str, f64)>> = Vec::new();
+    median_ms(min_time, || samples.push(host.forward(&inputs.host(), false).times.stages));
+    let stages = samples.first().map_or(0, Vec::len);
+    (0..stages)
+        .map(|i| {
+            let mut ms: Vec<f64> = samples.iter().filter_map(|s| s.get(i).map(|x| x.1)).collect();
+            ms.sort_by(f64::total_cmp);
+            (samples[0][i].0, ms[ms.len() / 2])
+        })
+        .collect()
 }
 
 /// The machine's own fp32 GEMM rate through the same library the learner uses (burn's

@@ -6,8 +6,8 @@ use super::train::DeviceKind;
 use anyhow::Result;
 use mdrlat_nn::Variant;
 use mdrlat_train::bench::{
-    decision_ms, gemm_reference_gflops, infer_ms, policy_batch_ms, profile, replay_bytes,
-    update_gflops, update_ms,
+    decision_ms, forward_stages_ms, gemm_reference_gflops, infer_ms, observation_inputs_ms,
+    policy_batch_ms, profile, replay_bytes, update_gflops, update_ms,
 };
 use std::time::Duration;
 
@@ -197,6 +197,21 @@ pub fn run(a: &TrainArgs) -> Result<()> {
         // A batched decision of 64 observations by forward size (eval's --forward-batch).
         if !a.json {
             out!("\n{} decisions for 64 observations on {threads} threads:", v.name());
+        }
+        let normalising = observation_inputs_ms(v, 64, time);
+        if a.json {
+            out!(
+                "{}",
+                serde_json::json!({"bench": "observation_inputs", "variant": v.name(),
+                    "observations": 64, "threads": 1,
+                    "ms": (normalising * 1000.0).round() / 1000.0})
+            );
+        } else {
+            let label = "their network inputs (normalised stacks), one thread";
+            out!("  {label:<52} {normalising:>8.1} ms");
+            for (stage, ms) in forward_stages_ms(v, 16, time) {
+                out!("  {:<52} {ms:>8.1} ms", format!("a forward of 16 on one thread: {stage}"));
+            }
         }
         for fb in [None, Some(8), Some(16), Some(32)] {
             let (ms, gflops) = policy_batch_ms(v, &device, 64, fb, threads, time);

@@ -1296,7 +1296,13 @@ mod avx512 {
         for y in 0..g.out_rows {
             let mut x = 0;
             while x < g.out_cols {
-                let n = [16, 8, 4, 2, 1].into_iter().find(|&r| r <= g.out_cols - x).unwrap_or(1);
+                // Tiles of 20 positions: the depth layer's whole output row (20 columns) in 20
+                // independent sums, where a 16 + 4 split left the 4-wide tile waiting on FMA
+                // latency. Same sums; a forward of 16 images' streams 1.7 → 1.6 ms and
+                // depth-only steps 17.9 / 18.8 → 17.3 / 17.7 ms in alternating pairs on a
+                // Sapphire Rapids Xeon (2026-12-04).
+                let n =
+                    [20, 16, 8, 4, 2, 1].into_iter().find(|&r| r <= g.out_cols - x).unwrap_or(1);
                 let base = unsafe { img.add(y * g.stride * g.cols + x * g.stride) };
                 let o = unsafe { out.add((y * g.out_cols + x) * 16) };
                 // The paper's stride (8) as a constant: each tile's pixels are then fixed
@@ -1306,11 +1312,13 @@ mod avx512 {
                 // alternating pairs on a Sapphire Rapids Xeon.
                 unsafe {
                     match (n, g.stride) {
+                        (20, 8) => conv16_tile::<20, 8>(g, base, wt, o),
                         (16, 8) => conv16_tile::<16, 8>(g, base, wt, o),
                         (8, 8) => conv16_tile::<8, 8>(g, base, wt, o),
                         (4, 8) => conv16_tile::<4, 8>(g, base, wt, o),
                         (2, 8) => conv16_tile::<2, 8>(g, base, wt, o),
                         (1, 8) => conv16_tile::<1, 8>(g, base, wt, o),
+                        (20, _) => conv16_tile::<20, 0>(g, base, wt, o),
                         (16, _) => conv16_tile::<16, 0>(g, base, wt, o),
                         (8, _) => conv16_tile::<8, 0>(g, base, wt, o),
                         (4, _) => conv16_tile::<4, 0>(g, base, wt, o),
