@@ -46,6 +46,16 @@ fn a_short_laser_only_run_beats_the_random_policy() {
     let (report, _) =
         train(world.clone(), &sim, &config, &Device::flex(), &dir, false, |_| {}).expect("train");
     let trained = report.evaluations.last().expect("an evaluation").mean();
+    // Where the time went: every part of the loop took some, and the parts add up to the
+    // session (less what came before the loop: set-up, the first reset).
+    let parts = report.timing.parts();
+    assert!(parts.iter().all(|&(_, s)| s > 0.0), "{parts:?}");
+    let total: f64 = parts.iter().map(|(_, s)| s).sum();
+    assert!(
+        total <= report.seconds && total > 0.8 * report.seconds,
+        "{total} of {}",
+        report.seconds
+    );
 
     // The random policy from the same fixed evaluation start poses.
     let mut env = Env::from_world(world, sim).expect("env");
