@@ -1721,10 +1721,37 @@ mod tests {
             Self { g, img }
         }
 
-        /// The pixel kernel value `(ch, ky, kx)` meets at output position `(y, x)`.
-        fn px(&self, ch: usize, ky: usize, kx: usize, y: usize, x: usize) -> f64 {
+        /// Every term of the convolution's definition: output position `y·out_cols + x`,
+        /// kernel value `(ch·kh + ky)·kw + kx`, and the pixel the two meet at.
+        fn terms(&self) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
+            let g = self.g;
+            let kernel = g.channels * g.kh * g.kw;
+            (0..g.out_rows * g.out_cols).flat_map(move |p| {
+                let (y, x) = (p / g.out_cols, p % g.out_cols);
+                (0..kernel).map(move |k| {
+                    let (ch, ky, kx) = (k / (g.kh * g.kw), (k / g.kw) % g.kh, k % g.kw);
+                    let at = (ch * g.rows + y * g.stride + ky) * g.cols + x * g.stride + kx;
+                    (p, k, f64::from(self.img[at]))
+                })
+            })
+        }
+
+        /// `0.5 +` the definition's sums (the kernels add to 0.5, to check they add) of
+        /// pixel · `other[·, f]` for the 16 filters `f`: per output position with `other` the
+        /// weight (the convolution), or per kernel value with `other` the output gradient
+        /// (the weight gradient).
+        fn definition(&self, other: &[f32], per_position: bool) -> Vec<f32> {
             let g = &self.g;
-            self.img[(ch * g.rows + y * g.stride + ky) * g.cols + x * g.stride + kx] as f64
+            let rows =
+                if per_position { g.out_rows * g.out_cols } else { g.channels * g.kh * g.kw };
+            let mut sums = vec![0.0f64; rows * 16];
+            for (p, k, px) in self.terms() {
+                let (row, by) = if per_position { (p, k) } else { (k, p) };
+                for f in 0..16 {
+                    sums[row * 16 + f] += px * f64::from(other[by * 16 + f]);
+                }
+            }
+            sums.iter().map(|&s| 0.5 + s as f32).collect()
         }
 
         /// `len` values for the other operand (weights or output gradients).
@@ -1747,32 +1774,21 @@ mod tests {
     }
 
     /// The direct first-layer convolution against its definition, at the paper's stride
-    /// (its constant-stride tiles) and at others, with every tile width (16 to 1) at both.
+    /// (its constant-stride tiles) and at others, with every tile width (20, 16 to 1) at both.
     #[test]
     fn conv16_matches_the_definition() {
-        for shape in
-            [(4, 10, 14, 8, 2, 31), (2, 3, 5, 2, 3, 23), (1, 2, 19, 3, 2, 7), (1, 2, 19, 3, 1, 9)]
-        {
+        for shape in [
+            (4, 10, 14, 8, 2, 31),
+            (2, 3, 5, 2, 3, 23),
+            (1, 2, 19, 3, 2, 7),
+            (1, 2, 19, 3, 1, 9),
+            (2, 3, 5, 8, 1, 16),
+            (1, 2, 19, 3, 1, 17),
+        ] {
             let c = ConvCase::new(shape);
             let g = c.g;
             let wt = ConvCase::values(g.channels * g.kh * g.kw * 16);
-            let mut want = vec![0.5f32; g.out_rows * g.out_cols * 16];
-            for y in 0..g.out_rows {
-                for x in 0..g.out_cols {
-                    for f in 0..16 {
-                        let mut sum = 0.0f64;
-                        for ch in 0..g.channels {
-                            for ky in 0..g.kh {
-                                for kx in 0..g.kw {
-                                    let w = wt[((ch * g.kh + ky) * g.kw + kx) * 16 + f] as f64;
-                                    sum += c.px(ch, ky, kx, y, x) * w;
-                                }
-                            }
-                        }
-                        want[(y * g.out_cols + x) * 16 + f] += sum as f32;
-                    }
-                }
-            }
+            let want = c.definition(&wt, true);
             let mut got = vec![0.5f32; want.len()];
             if conv16(&g, &c.img, &wt, &mut got) {
                 c.check(&got, &want);
@@ -1788,23 +1804,7 @@ mod tests {
             let c = ConvCase::new(shape);
             let g = c.g;
             let dy = ConvCase::values(g.out_rows * g.out_cols * 16);
-            let mut want = vec![0.5f32; g.channels * g.kh * g.kw * 16];
-            for ch in 0..g.channels {
-                for ky in 0..g.kh {
-                    for kx in 0..g.kw {
-                        for f in 0..16 {
-                            let mut sum = 0.0f64;
-                            for y in 0..g.out_rows {
-                                for x in 0..g.out_cols {
-                                    let d = dy[(y * g.out_cols + x) * 16 + f] as f64;
-                                    sum += c.px(ch, ky, kx, y, x) * d;
-                                }
-                            }
-                            want[((ch * g.kh + ky) * g.kw + kx) * 16 + f] += sum as f32;
-                        }
-                    }
-                }
-            }
+            let want = c.definition(&dy, false);
             let mut got = vec![0.5f32; want.len()];
             if conv16_weight_grad(&g, &c.img, &dy, &mut got) {
                 c.check(&got, &want);
