@@ -98,6 +98,8 @@ fn vector_matrix(c: &mut Criterion) {
         (4096, 512, 0.0, 36),
         (4096, 512, 0.6, 36),
         (4096, 512, 0.6, 128),
+        (4096, 512, 0.2, 36),
+        (4096, 512, 0.4, 36),
     ] {
         let mut x = values(din, 3);
         // Every row whose index falls in the zero share of each 10: ~`zero_share` zeros.

@@ -227,6 +227,13 @@ pub fn run(a: &TrainArgs) -> Result<()> {
                 out!("  {label:<52} {ms:>8.1} ms {gflops:>6.1} GFLOP/s");
             }
         }
+        // One decision (batch 1, as a robot makes them) by stage: what its weight reads cost.
+        if !a.json {
+            out!("\none {} decision on one thread, by stage:", v.name());
+            for (stage, ms) in forward_stages_ms(v, 1, time) {
+                out!("  {stage:<52} {ms:>8.3} ms");
+            }
+        }
     }
     Ok(())
 }
