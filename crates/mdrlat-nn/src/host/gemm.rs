@@ -205,7 +205,8 @@ pub(crate) fn gemm_short_by_long(
     #[cfg(target_arch = "x86_64")]
     if m == 1 && n.is_multiple_of(16) && n > 0 && k > 2 && avx512::available() {
         // A single decision: the weight is read from memory once, and only its rows the
-        // input does not zero (a ReLU zeroes about half of a representation). The sums are
+        // input does not zero (a ReLU zeroes about half of a representation; an input with
+        // few zeros has every row read, in one stream). The sums are
         // the `gemm` crate's, whose vector-matrix path this replaces (from a depth of 3:
         // below, that crate multiplies and adds apart).
         if !accumulate {
@@ -659,7 +660,8 @@ mod avx512 {
     /// scattered, 2 KB streams each, too short for the hardware prefetchers to follow.
     ///
     /// Where at least [`DENSE_SHARE`] of `x` is non-zero (the bilinear fusion's `vec(d lᵀ)`
-    /// has no zeros) every row is read instead, one after another ([`vec_mat_rows`]): on
+    /// has no zeros) every row is read instead, one after another ([`vec_mat_rows`]; its
+    /// zero rows add `0 · w` as the `gemm` crate's do, non-finite weights included): on
     /// Zen 4 a single sequential stream is what its prefetchers follow, and both the gaps
     /// of skipped rows and rows read side by side (four or two) cost 2–3x (criterion,
     /// `vector_matrix_bytes`, 8192 → 512: 0.48–0.50 ms one row at a time, 1.1–1.5 ms four
@@ -683,20 +685,24 @@ mod avx512 {
         // Groups between the one summed and the one fetched (1 and 2 measured the same).
         const AHEAD: usize = 2;
         rows.clear();
-        // The non-zero inputs, 16 at a time (NaN counts as non-zero: it must reach `y`).
-        for at in (0..k).step_by(16) {
+        // The non-zero inputs of each 16 (NaN counts as non-zero: it must reach `y`).
+        let nonzero = |at: usize| {
             // SAFETY: the mask keeps the load within the `k` floats of `x`.
             let v = unsafe { _mm512_maskz_loadu_ps(mask(k - at), x.add(at)) };
-            let mut bits = _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(v, _mm512_setzero_ps());
+            _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(v, _mm512_setzero_ps())
+        };
+        let count: u32 = (0..k).step_by(16).map(|at| nonzero(at).count_ones()).sum();
+        if count as f32 >= DENSE_SHARE * k as f32 {
+            // SAFETY: the caller's contract is this function's.
+            unsafe { vec_mat_rows(k, n, x, w, ldw, y) };
+            return;
+        }
+        for at in (0..k).step_by(16) {
+            let mut bits = nonzero(at);
             while bits != 0 {
                 rows.push(at + bits.trailing_zeros() as usize);
                 bits &= bits - 1;
             }
-        }
-        if rows.len() as f32 >= DENSE_SHARE * k as f32 {
-            // SAFETY: the caller's contract is this function's.
-            unsafe { vec_mat_rows(k, n, x, w, ldw, y) };
-            return;
         }
         let vectors = n / 16;
         let row = |i: usize| unsafe { w.add(i * ldw) };
