@@ -92,19 +92,30 @@ fn forward(c: &mut Criterion) {
 fn vector_matrix(c: &mut Criterion) {
     let mut g = c.benchmark_group("vector_matrix_bytes");
     let pool = pool(1);
-    for (din, dout, zero_share, mb) in [
-        (8192, 512, 0.0, 36),
-        (8192, 512, 0.0, 128),
-        (4096, 512, 0.0, 36),
-        (4096, 512, 0.6, 36),
-        (4096, 512, 0.6, 128),
-        (4096, 512, 0.2, 36),
-        (4096, 512, 0.4, 36),
+    // (inputs, outputs, share of zero inputs, MB of weights read in turn, zeros scattered
+    // at random as a ReLU leaves them rather than evenly)
+    for (din, dout, zero_share, mb, scattered) in [
+        (8192, 512, 0.0, 36, false),
+        (8192, 512, 0.0, 128, false),
+        (4096, 512, 0.0, 36, false),
+        (4096, 512, 0.6, 36, false),
+        (4096, 512, 0.6, 128, false),
+        (4096, 512, 0.2, 36, false),
+        (4096, 512, 0.4, 36, false),
+        (4096, 512, 0.55, 36, true),
+        (4096, 512, 0.55, 128, true),
     ] {
         let mut x = values(din, 3);
-        // Every row whose index falls in the zero share of each 10: ~`zero_share` zeros.
         for (i, v) in x.iter_mut().enumerate() {
-            if ((i * 7) % 10) < (zero_share * 10.0) as usize {
+            let zero = if scattered {
+                // A multiplicative hash of the index: zeros in runs and gaps of every length.
+                ((i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) % 100
+                    < (zero_share * 100.0) as u64
+            } else {
+                // Every row whose index falls in the zero share of each 10.
+                ((i * 7) % 10) < (zero_share * 10.0) as usize
+            };
+            if zero {
                 *v = 0.0;
             }
         }
@@ -112,7 +123,8 @@ fn vector_matrix(c: &mut Criterion) {
         let mut y = vec![0.0f32; dout];
         g.throughput(Throughput::Bytes((din * dout * 4) as u64));
         let temp = if mb < 64 { "l3" } else { "mem" };
-        let id = format!("{din}->{dout}/zeros{zero_share}/{temp}");
+        let spread = if scattered { "scattered" } else { "even" };
+        let id = format!("{din}->{dout}/zeros{zero_share}-{spread}/{temp}");
         let mut i = 0;
         g.bench_function(BenchmarkId::new("host", &id), |b| {
             b.iter(|| {
