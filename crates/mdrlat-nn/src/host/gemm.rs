@@ -664,7 +664,7 @@ mod avx512 {
     /// instead of 0.96–1.14 in alternating runs; not measured on the Xeon.
     ///
     /// Where at least [`DENSE_SHARE`] of `x` is non-zero (the bilinear fusion's `vec(d lᵀ)`
-    /// has no zeros) every row is read instead, one after another ([`vec_mat_rows`]; its
+    /// has no zeros) every row is read instead, one after another ([`add_row`]; its
     /// zero rows add `0 · w` as the `gemm` crate's do, non-finite weights included): on
     /// Zen 4 a single sequential stream is what its prefetchers follow, and both the gaps
     /// of skipped rows and rows read side by side (four or two) cost 2–3x (criterion,
@@ -697,8 +697,10 @@ mod avx512 {
         };
         let count: u32 = (0..k).step_by(16).map(|at| nonzero(at).count_ones()).sum();
         if count as f32 >= DENSE_SHARE * k as f32 {
-            // SAFETY: the caller's contract is this function's.
-            unsafe { vec_mat_rows(k, n, x, w, ldw, y) };
+            for r in 0..k {
+                // SAFETY: row `r < k` of `w` and `x[r]` are inside the caller's matrices.
+                unsafe { add_row(n, *x.add(r), w.add(r * ldw), y) };
+            }
             return;
         }
         for at in (0..k).step_by(16) {
@@ -740,15 +742,7 @@ mod avx512 {
                     }
                 } else {
                     for &r in group {
-                        let (xr, wr) = (_mm512_set1_ps(*x.add(r)), row(r));
-                        for v in 0..vectors {
-                            let j = v * 16;
-                            let acc = _mm512_loadu_ps(y.add(j));
-                            _mm512_storeu_ps(
-                                y.add(j),
-                                _mm512_fmadd_ps(_mm512_loadu_ps(wr.add(j)), xr, acc),
-                            );
-                        }
+                        add_row(n, *x.add(r), row(r), y);
                     }
                 }
             }
@@ -758,32 +752,22 @@ mod avx512 {
     /// The share of non-zero inputs from which [`vec_mat_nonzero`] reads every row.
     pub(super) const DENSE_SHARE: f32 = 0.75;
 
-    /// `y (n) += x (k) · w (k × n, row stride ldw)`, every row in order, one row at a time
-    /// (`y` stays in L1; the weight is one sequential stream where `ldw == n`): the `gemm`
-    /// crate's vector-matrix loop, with the same sums.
+    /// `y (n) += xr · w_row (n)`, one fused multiply-add an element (`y` stays in L1): a row
+    /// of the `gemm` crate's vector-matrix loop, with its sums. Row after row, that is
+    /// [`vec_mat_nonzero`]'s dense path (one sequential stream where the rows are `n` apart).
     ///
     /// # Safety
-    /// As [`vec_mat_nonzero`].
+    /// AVX-512F must be available; `n` must be a multiple of 16; `w_row` and `y` must hold
+    /// `n` floats.
     #[target_feature(enable = "avx512f")]
-    unsafe fn vec_mat_rows(
-        k: usize,
-        n: usize,
-        x: *const f32,
-        w: *const f32,
-        ldw: usize,
-        y: *mut f32,
-    ) {
-        for r in 0..k {
-            // SAFETY: row `r < k` of `w` holds `n` floats; `y` holds `n`.
+    #[inline]
+    unsafe fn add_row(n: usize, xr: f32, w_row: *const f32, y: *mut f32) {
+        let xr = _mm512_set1_ps(xr);
+        for j in (0..n).step_by(16) {
+            // SAFETY: `j + 16 <= n`, inside both rows.
             unsafe {
-                let (xr, wr) = (_mm512_set1_ps(*x.add(r)), w.add(r * ldw));
-                for j in (0..n).step_by(16) {
-                    let acc = _mm512_loadu_ps(y.add(j));
-                    _mm512_storeu_ps(
-                        y.add(j),
-                        _mm512_fmadd_ps(_mm512_loadu_ps(wr.add(j)), xr, acc),
-                    );
-                }
+                let acc = _mm512_loadu_ps(y.add(j));
+                _mm512_storeu_ps(y.add(j), _mm512_fmadd_ps(_mm512_loadu_ps(w_row.add(j)), xr, acc));
             }
         }
     }
