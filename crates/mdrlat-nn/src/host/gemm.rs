@@ -660,8 +660,9 @@ mod avx512 {
     /// scattered, 2 KB streams each, too short for the hardware prefetchers to follow. They
     /// are fetched into L2, not L1 (`_MM_HINT_T2`): on Zen 4 a 4096 → 512 layer with 55 %
     /// of its inputs zero at random took 154–189 µs instead of 254–263 with its weights out
-    /// of cache (criterion, `zeros0.55-scattered/mem`), and an MDRLAT decision 0.78–0.83 ms
-    /// instead of 0.96–1.14 in alternating runs; not measured on the Xeon.
+    /// of cache (criterion, `zeros0.55-scattered/mem`), and `mdrlat ros`'s MDRLAT decision
+    /// (100 ms apart) 0.81–0.83 ms instead of 0.87–0.97; back-to-back decisions within the
+    /// noise; not measured on the Xeon.
     ///
     /// Where at least [`DENSE_SHARE`] of `x` is non-zero (the bilinear fusion's `vec(d lᵀ)`
     /// has no zeros) every row is read instead, one after another ([`add_row`]; its
