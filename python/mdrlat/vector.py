@@ -1,7 +1,8 @@
 """N environments stepped in Rust on all cores: a `gymnasium.vector.VectorEnv`.
 
 The Rust `VecEnv` steps every environment with the GIL released and writes the
-observations into numpy buffers this object keeps. Each environment's laser scans and depth
+observations into numpy buffers of its own, made once; one Rust call per step returns
+Gymnasium's tuple, so that little Python runs between steps while the worker threads wait. Each environment's laser scans and depth
 images live in a window buffer of 32 frames: an observation's ``laser`` and ``depth`` are
 views of 4 consecutive frames of it, and a step writes the one new frame and moves the view
 on, instead of copying all four (a whole stack only after a reset, and every 28 steps when
@@ -44,40 +45,13 @@ class VectorEnv(GymVectorEnv):
         self.single_action_space = self.single.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        n = self.num_envs
-        (stack, beams), (_, rows, cols), odom, goal = _core.shapes()
-        frames = _core.window_frames()
-        self._stack = stack
         nav = self._venv.task == "nav"
-        self._goal = np.zeros((n if nav else 0, goal), np.float32)
-        self._rewards = np.zeros(n, np.float32)
-        self._terminated = np.zeros(n, np.bool_)
-        self._truncated = np.zeros(n, np.bool_)
-        self._d_min = np.zeros(n, np.float32)
-        self._buffers = {
-            "laser": np.zeros((n, frames, beams), np.float32),
-            "depth": np.zeros((n, frames, rows, cols), np.float32),
-            "odom": np.zeros((n, odom), np.float32),
-            "goal": self._goal,
-            "final_laser": np.zeros((n, stack, beams), np.float32),
-            "final_depth": np.zeros((n, stack, rows, cols), np.float32),
-            "final_odom": np.zeros((n, odom), np.float32),
-            "final_goal": np.zeros_like(self._goal),
-        }
-        self._final_keys = [k for k in ("laser", "depth", "odom", "goal") if k != "goal" or nav]
-        self._all = np.ones(n, np.bool_)
-        # The observation dicts of every window position, made once.
-        self._windows = [self._window(o) for o in range(frames - stack + 1)]
-        self._obs = self._windows[0]
-        self._started = False
-
-    def _window(self, offset: int) -> dict[str, np.ndarray]:
-        """The observations: frames ``offset`` to ``offset + 4`` of the window buffers."""
-        b, end = self._buffers, offset + self._stack
-        obs = {"laser": b["laser"][:, offset:end], "depth": b["depth"][:, offset:end], "odom": b["odom"]}
-        if len(self._goal):
-            obs["goal"] = self._goal
-        return obs
+        b = self._venv.buffers()
+        keys = [k for k in ("laser", "depth", "odom", "goal") if k != "goal" or nav]
+        # Environment i's final observation: row i of the `final_*` buffers.
+        self._final_views = [{k: b["final_" + k][i] for k in keys} for i in range(self.num_envs)]
+        self._none = np.full(self.num_envs, None, object)
+        self._false = np.zeros(self.num_envs, np.bool_)
 
     @property
     def threads(self) -> int:
@@ -100,40 +74,37 @@ class VectorEnv(GymVectorEnv):
         for s in seeds:
             if s is not None and not 0 <= s < 2**64:
                 raise ValueError(f"seed {s}: expected 0 to 2**64 - 1")
-        poses = self._venv.reset(seeds, self._buffers)
-        self._obs = self._windows[0]
-        self._started = True
-        return self._obs, {"pose": np.array(poses, np.float32), "_pose": np.ones(self.num_envs, np.bool_)}
+        obs, poses = self._venv.reset(seeds)
+        return obs, {"pose": np.array(poses, np.float32), "_pose": np.ones(self.num_envs, np.bool_)}
 
     def step(self, actions):
         """One step of every environment with ``actions`` (one Table 1 index each)."""
-        if not self._started:
-            raise RuntimeError("step() before reset(): call reset() first")
-        a = np.ascontiguousarray(actions, dtype=np.int64).reshape(-1)
-        offset, ended = self._venv.step(
-            a, self._buffers, self._rewards, self._terminated, self._truncated, self._d_min
-        )
-        self._obs = self._windows[offset]
-        infos: dict[str, Any] = {"d_min": self._d_min.copy(), "_d_min": self._all.copy()}
+        try:
+            # The whole step is one Rust call: the observations, rewards and flags are
+            # its own buffers, the infos its dict; only ended episodes come back here.
+            obs, rewards, terminated, truncated, infos, ended = self._venv.step(actions)
+        except TypeError:  # not an int64 array
+            a = np.ascontiguousarray(actions, dtype=np.int64)
+            obs, rewards, terminated, truncated, infos, ended = self._venv.step(a)
         if ended:
             self._add_finals(infos, ended)
-        return self._obs, self._rewards, self._terminated, self._truncated, infos
+        return obs, rewards, terminated, truncated, infos
 
     def _add_finals(self, infos: dict[str, Any], ended: list[tuple[int, dict[str, Any]]]) -> None:
         """``infos["final_obs"]`` and ``infos["final_info"]`` with their masks, exactly as
-        Gymnasium's ``VectorEnv._add_info`` builds them (tested), in one pass."""
-        n, b = self.num_envs, self._buffers
-        final_obs = np.full(n, None, dtype=object)
-        mask = np.zeros(n, np.bool_)
+        Gymnasium's ``VectorEnv._add_info`` builds them (tested), in one pass. The arrays
+        are copies of ones made once (``np.full(n, None, object)`` costs 5x a copy)."""
+        none, false = self._none, self._false
+        final_obs, mask = none.copy(), false.copy()
         final_info: dict[str, Any] = {}
         for i, info in ended:
-            final_obs[i] = {k: b["final_" + k][i] for k in self._final_keys}
+            final_obs[i] = dict(self._final_views[i])
             mask[i] = True
             for key, value in info.items():
                 if key not in final_info:
                     scalar = type(value) in (int, float, bool)
-                    final_info[key] = np.zeros(n, type(value)) if scalar else np.full(n, None, object)
-                    final_info["_" + key] = np.zeros(n, np.bool_)
+                    final_info[key] = np.zeros(len(none), type(value)) if scalar else none.copy()
+                    final_info["_" + key] = false.copy()
                 final_info[key][i] = value
                 final_info["_" + key][i] = True
         infos["final_obs"], infos["_final_obs"] = final_obs, mask

@@ -13,12 +13,11 @@ use mdrlat_sim::config::Task;
 use mdrlat_sim::{Collision, Observation, SimConfig};
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{
-    IntoPyArray, PyArray3, PyReadonlyArray1, PyReadwriteArray1, PyReadwriteArray2,
-    PyUntypedArrayMethods,
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArray4, PyArrayMethods, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PySlice};
 
 /// The simulator's name for a collision (`bumper`, `pedestrian`, `laser`), as `episodes.csv`
 /// writes it.
@@ -331,90 +330,210 @@ struct EnvSlot<'a> {
     last: ObsSlot<'a>,
 }
 
-/// Numpy buffers a [`VecEnv`] writes into (float32, C order): the current observations,
-/// with the frame windows `laser` `(N, 32, 512)` and `depth` `(N, 32, 128, 160)` (see
-/// [`WINDOW_FRAMES`]), `odom` `(N, 6)`, `goal` `(N, 3)` or `(0, 3)`; and the final
+/// The numpy arrays a [`VecEnv`] writes into, made with it (float32 and bool, C order):
+/// the frame windows `laser` `(N, 32, 512)` and `depth` `(N, 32, 128, 160)` (see
+/// [`WINDOW_FRAMES`]), `odom` `(N, 6)`, `goal` `(N, 3)` or `(0, 3)`; the final
 /// observations of ended episodes, `final_laser` `(N, 4, 512)`, `final_depth` `(N, 4, 128,
-/// 160)`, `final_odom`, `final_goal`.
-#[derive(FromPyObject)]
-#[pyo3(from_item_all)]
-struct Buffers<'py> {
-    laser: numpy::PyReadwriteArrayDyn<'py, f32>,
-    depth: numpy::PyReadwriteArrayDyn<'py, f32>,
-    odom: PyReadwriteArray2<'py, f32>,
-    goal: PyReadwriteArray2<'py, f32>,
-    final_laser: numpy::PyReadwriteArrayDyn<'py, f32>,
-    final_depth: numpy::PyReadwriteArrayDyn<'py, f32>,
-    final_odom: PyReadwriteArray2<'py, f32>,
-    final_goal: PyReadwriteArray2<'py, f32>,
+/// 160)`, `final_odom`, `final_goal`; a step's `rewards`, `terminated`, `truncated` and
+/// `d_min`, `(N,)` each; and the observation dict of every window position (views of the
+/// windows). Made once instead of passed in with every step: extracting 13 numpy arguments
+/// and checking their borrows took ~1.5 µs a call, in the serial stretch between steps
+/// during which the worker threads wait.
+struct VecBuffers {
+    laser: Py<PyArray3<f32>>,
+    depth: Py<PyArray4<f32>>,
+    odom: Py<PyArray2<f32>>,
+    goal: Py<PyArray2<f32>>,
+    final_laser: Py<PyArray3<f32>>,
+    final_depth: Py<PyArray4<f32>>,
+    final_odom: Py<PyArray2<f32>>,
+    final_goal: Py<PyArray2<f32>>,
+    rewards: Py<PyArray1<f32>>,
+    terminated: Py<PyArray1<bool>>,
+    truncated: Py<PyArray1<bool>>,
+    d_min: Py<PyArray1<f32>>,
+    /// `windows[k]`: the observation dict of frames `k..k + 4` of the windows.
+    windows: Vec<Py<PyDict>>,
 }
 
-/// A C-order buffer as a slice of `n` rows of `row` values each.
-fn rows<'a, D: numpy::ndarray::Dimension>(
+/// Every buffer of a [`VecBuffers`] as Rust slices, for one call.
+struct BufferViews<'a> {
+    slots: Vec<EnvSlot<'a>>,
+    rewards: &'a mut [f32],
+    terminated: &'a mut [bool],
+    truncated: &'a mut [bool],
+    d_min: &'a mut [f32],
+}
+
+/// `a`'s values as a slice of `len` values, or an error naming the buffer if it no longer
+/// holds that many (an array resized from Python).
+///
+/// # Safety
+/// Nothing else may read or write `a`'s memory while the slice lives (see
+/// [`VecBuffers::views`]).
+#[allow(unsafe_code, clippy::mut_from_ref)]
+unsafe fn values<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
+    py: Python<'a>,
     name: &str,
-    a: &'a mut numpy::PyReadwriteArray<'_, f32, D>,
-    n: usize,
-    row: usize,
-) -> PyResult<std::slice::ChunksExactMut<'a, f32>> {
-    if a.len() != n * row {
-        return Err(PyValueError::new_err(format!(
-            "buffer '{name}' holds {} values, {n} environments need {}",
-            a.len(),
-            n * row
+    a: &'a Py<numpy::PyArray<T, D>>,
+    len: usize,
+) -> PyResult<&'a mut [T]> {
+    // SAFETY: the caller's promise.
+    let s = unsafe { a.bind(py).as_slice_mut() }
+        .map_err(|e| PyRuntimeError::new_err(format!("buffer '{name}': {e}")))?;
+    if s.len() != len {
+        return Err(PyRuntimeError::new_err(format!(
+            "buffer '{name}' holds {} values, expected {len}",
+            s.len()
         )));
     }
-    if !a.is_c_contiguous() {
-        return Err(PyValueError::new_err(format!("buffer '{name}' is not C-contiguous")));
-    }
-    let s = a.as_slice_mut().map_err(|e| PyValueError::new_err(format!("buffer '{name}': {e}")))?;
-    // `chunks_exact_mut(0)` panics; an empty buffer (no goals) has no rows.
-    Ok(s.chunks_exact_mut(row.max(1)))
+    Ok(s)
 }
 
-/// Every environment's slots in `b`, checked against `n` environments (and `nav`).
-fn env_slots<'a>(b: &'a mut Buffers<'_>, n: usize, nav: bool) -> PyResult<Vec<EnvSlot<'a>>> {
-    let (laser, depth, odom) = (LASER_BEAMS, DEPTH_LEN, 2 * ODOM_HISTORY);
-    let goal = if nav { GOAL_DIM } else { 0 };
-    let mut now_l = rows("laser", &mut b.laser, n, WINDOW_FRAMES * laser)?;
-    let mut now_d = rows("depth", &mut b.depth, n, WINDOW_FRAMES * depth)?;
-    let mut now_o = rows("odom", &mut b.odom, n, odom)?;
-    let mut now_g = rows("goal", &mut b.goal, n, goal)?;
-    let mut last_l = rows("final_laser", &mut b.final_laser, n, FRAME_STACK * laser)?;
-    let mut last_d = rows("final_depth", &mut b.final_depth, n, FRAME_STACK * depth)?;
-    let mut last_o = rows("final_odom", &mut b.final_odom, n, odom)?;
-    let mut last_g = rows("final_goal", &mut b.final_goal, n, goal)?;
-    // A goal-less buffer has no rows: its slots get empty goals.
-    let mut next = || -> Option<EnvSlot<'a>> {
-        Some(EnvSlot {
-            now: ObsSlot {
-                laser: now_l.next()?,
-                depth: now_d.next()?,
-                odom: now_o.next()?,
-                goal: now_g.next().unwrap_or_default(),
-            },
-            last: ObsSlot {
-                laser: last_l.next()?,
-                depth: last_d.next()?,
-                odom: last_o.next()?,
-                goal: last_g.next().unwrap_or_default(),
-            },
-        })
-    };
-    (0..n).map(|_| next().ok_or_else(|| PyRuntimeError::new_err("buffers: too few rows"))).collect()
+impl VecBuffers {
+    /// Zeroed buffers for `n` environments (goals only with `nav`).
+    fn new(py: Python<'_>, n: usize, nav: bool) -> PyResult<Self> {
+        let (w, s, goals) = (WINDOW_FRAMES, FRAME_STACK, if nav { n } else { 0 });
+        let b = Self {
+            laser: PyArray3::zeros(py, [n, w, LASER_BEAMS], false).unbind(),
+            depth: PyArray4::zeros(py, [n, w, DEPTH_ROWS, DEPTH_COLS], false).unbind(),
+            odom: PyArray2::zeros(py, [n, 2 * ODOM_HISTORY], false).unbind(),
+            goal: PyArray2::zeros(py, [goals, GOAL_DIM], false).unbind(),
+            final_laser: PyArray3::zeros(py, [n, s, LASER_BEAMS], false).unbind(),
+            final_depth: PyArray4::zeros(py, [n, s, DEPTH_ROWS, DEPTH_COLS], false).unbind(),
+            final_odom: PyArray2::zeros(py, [n, 2 * ODOM_HISTORY], false).unbind(),
+            final_goal: PyArray2::zeros(py, [goals, GOAL_DIM], false).unbind(),
+            rewards: PyArray1::zeros(py, n, false).unbind(),
+            terminated: PyArray1::zeros(py, n, false).unbind(),
+            truncated: PyArray1::zeros(py, n, false).unbind(),
+            d_min: PyArray1::zeros(py, n, false).unbind(),
+            windows: Vec::new(),
+        };
+        let windows = (0..=w - s)
+            .map(|k| {
+                let frames = (PySlice::full(py), PySlice::new(py, k as isize, (k + s) as isize, 1));
+                let d = PyDict::new(py);
+                d.set_item("laser", b.laser.bind(py).get_item(frames.clone())?)?;
+                d.set_item("depth", b.depth.bind(py).get_item(frames)?)?;
+                d.set_item("odom", b.odom.bind(py))?;
+                if nav {
+                    d.set_item("goal", b.goal.bind(py))?;
+                }
+                Ok(d.unbind())
+            })
+            .collect::<PyResult<_>>()?;
+        Ok(Self { windows, ..b })
+    }
+
+    /// Every buffer as a Rust slice, checked against `n` environments (and `nav`).
+    ///
+    /// Sound because these arrays are this object's own: `&mut self` keeps Rust from
+    /// taking a second set, and the class documents that no other thread may touch them
+    /// during a call (the GIL is released then), as with any numpy buffer a native
+    /// function fills.
+    #[allow(unsafe_code)]
+    fn views<'a>(&'a mut self, py: Python<'a>, n: usize, nav: bool) -> PyResult<BufferViews<'a>> {
+        let (laser, depth, odom) = (LASER_BEAMS, DEPTH_LEN, 2 * ODOM_HISTORY);
+        let goal = if nav { GOAL_DIM } else { 0 };
+        let (w, s) = (WINDOW_FRAMES, FRAME_STACK);
+        // SAFETY: see above; each array is taken once.
+        let v = unsafe {
+            (
+                values(py, "laser", &self.laser, n * w * laser)?,
+                values(py, "depth", &self.depth, n * w * depth)?,
+                values(py, "odom", &self.odom, n * odom)?,
+                values(py, "goal", &self.goal, n * goal)?,
+                values(py, "final_laser", &self.final_laser, n * s * laser)?,
+                values(py, "final_depth", &self.final_depth, n * s * depth)?,
+                values(py, "final_odom", &self.final_odom, n * odom)?,
+                values(py, "final_goal", &self.final_goal, n * goal)?,
+                BufferViews {
+                    slots: Vec::new(),
+                    rewards: values(py, "rewards", &self.rewards, n)?,
+                    terminated: values(py, "terminated", &self.terminated, n)?,
+                    truncated: values(py, "truncated", &self.truncated, n)?,
+                    d_min: values(py, "d_min", &self.d_min, n)?,
+                },
+            )
+        };
+        let (now_l, now_d, now_o, now_g, last_l, last_d, last_o, last_g, mut views) = v;
+        // `chunks_exact_mut(0)` panics: goal-less buffers give every slot an empty goal.
+        fn rows(s: &mut [f32], len: usize) -> std::slice::ChunksExactMut<'_, f32> {
+            s.chunks_exact_mut(len.max(1))
+        }
+        let (mut now_g, mut last_g) = (rows(now_g, goal), rows(last_g, goal));
+        views.slots = rows(now_l, w * laser)
+            .zip(rows(now_d, w * depth))
+            .zip(rows(now_o, odom))
+            .zip(rows(last_l, s * laser))
+            .zip(rows(last_d, s * depth))
+            .zip(rows(last_o, odom))
+            .map(|(((((nl, nd), no), ll), ld), lo)| EnvSlot {
+                now: ObsSlot {
+                    laser: nl,
+                    depth: nd,
+                    odom: no,
+                    goal: now_g.next().unwrap_or_default(),
+                },
+                last: ObsSlot {
+                    laser: ll,
+                    depth: ld,
+                    odom: lo,
+                    goal: last_g.next().unwrap_or_default(),
+                },
+            })
+            .collect();
+        Ok(views)
+    }
+
+    /// The arrays by name, for Python (`final_*` for the final observations).
+    fn dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("laser", self.laser.bind(py))?;
+        d.set_item("depth", self.depth.bind(py))?;
+        d.set_item("odom", self.odom.bind(py))?;
+        d.set_item("goal", self.goal.bind(py))?;
+        d.set_item("final_laser", self.final_laser.bind(py))?;
+        d.set_item("final_depth", self.final_depth.bind(py))?;
+        d.set_item("final_odom", self.final_odom.bind(py))?;
+        d.set_item("final_goal", self.final_goal.bind(py))?;
+        d.set_item("rewards", self.rewards.bind(py))?;
+        d.set_item("terminated", self.terminated.bind(py))?;
+        d.set_item("truncated", self.truncated.bind(py))?;
+        d.set_item("d_min", self.d_min.bind(py))?;
+        Ok(d)
+    }
 }
+
+/// What [`VecEnv::step`] returns: Gymnasium's `(observations, rewards, terminated,
+/// truncated, infos)` and the ended episodes `(i, final_info)`.
+type StepTuple<'py> = (
+    Bound<'py, PyDict>,
+    Bound<'py, PyArray1<f32>>,
+    Bound<'py, PyArray1<bool>>,
+    Bound<'py, PyArray1<bool>>,
+    Bound<'py, PyDict>,
+    Vec<(usize, Bound<'py, PyDict>)>,
+);
 
 /// N environments stepped in parallel on all cores by the Rust `VecEnv`, the GIL
-/// released, writing into numpy buffers the caller keeps (no arrays made per step): each
-/// environment's thread writes its observations right after its step. Finished episodes
-/// restart at once (Gymnasium's same-step autoreset); their final observations go to the
-/// `final_*` buffers.
+/// released, writing into numpy buffers of its own (no arrays made per step but the info's
+/// `d_min`): each environment's thread writes its observations right after its step.
+/// Finished episodes restart at once (Gymnasium's same-step autoreset); their final
+/// observations go to the `final_*` buffers. No other thread may read or write the buffers
+/// (or views of them, such as the observations) while `reset` or `step` runs.
 #[pyclass(module = "mdrlat._core")]
 pub struct VecEnv {
     venv: mdrlat_sim::VecEnv,
     nav: bool,
+    buffers: VecBuffers,
     actions: Vec<mdrlat_core::Action>,
     /// Where the observations' 4-frame windows start in the laser and depth buffers.
     offset: usize,
+    /// `reset` has run.
+    started: bool,
+    /// `True` for every environment: the info's `_d_min` mask.
+    all: Vec<bool>,
 }
 
 #[pymethods]
@@ -423,7 +542,13 @@ impl VecEnv {
     /// on `threads` threads (0: every core).
     #[new]
     #[pyo3(signature = (world, config_json = "{}", num_envs = 1, threads = 0))]
-    fn new(world: &str, config_json: &str, num_envs: usize, threads: usize) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        world: &str,
+        config_json: &str,
+        num_envs: usize,
+        threads: usize,
+    ) -> PyResult<Self> {
         if num_envs == 0 || num_envs > 4096 {
             return Err(PyValueError::new_err(format!("num_envs {num_envs}: expected 1 to 4096")));
         }
@@ -433,19 +558,32 @@ impl VecEnv {
             std::sync::Arc::new(mdrlat_sim::StaticScene::new(std::sync::Arc::new(loaded), &config));
         let venv = mdrlat_sim::VecEnv::new(scene, config, num_envs, threads)
             .map_err(|e| PyValueError::new_err(format!("world '{world}': {e}")))?;
-        Ok(Self { venv, nav, actions: Vec::with_capacity(num_envs), offset: 0 })
+        Ok(Self {
+            venv,
+            nav,
+            buffers: VecBuffers::new(py, num_envs, nav)?,
+            actions: Vec::with_capacity(num_envs),
+            offset: 0,
+            started: false,
+            all: vec![true; num_envs],
+        })
+    }
+
+    /// The numpy buffers the environments write into, by name (see [`VecBuffers`]).
+    fn buffers<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.buffers.dict(py)
     }
 
     /// Starts an episode in every environment: environment `i` with `seeds[i]` (`None`:
     /// its stream goes on), exactly as `Env.reset(seed=seeds[i])`; writes the observations
-    /// into `buffers` (windows at frame 0). Returns each environment's pose `(x, y,
-    /// yaw_deg)`.
-    fn reset(
+    /// into the buffers (windows at frame 0). Returns the observations and each
+    /// environment's pose `(x, y, yaw_deg)`.
+    #[allow(clippy::type_complexity)]
+    fn reset<'py>(
         &mut self,
-        py: Python<'_>,
+        py: Python<'py>,
         seeds: Vec<Option<u64>>,
-        mut buffers: Buffers<'_>,
-    ) -> PyResult<Vec<(f32, f32, f32)>> {
+    ) -> PyResult<(Bound<'py, PyDict>, Vec<(f32, f32, f32)>)> {
         let n = self.venv.len();
         if seeds.len() != n {
             return Err(PyValueError::new_err(format!(
@@ -453,7 +591,6 @@ impl VecEnv {
                 seeds.len()
             )));
         }
-        let mut slots = env_slots(&mut buffers, n, self.nav)?;
         let venv = &mut self.venv;
         py.detach(|| -> Result<(), mdrlat_sim::SimError> {
             for (i, seed) in seeds.iter().enumerate() {
@@ -462,74 +599,52 @@ impl VecEnv {
             Ok(())
         })
         .map_err(sim_error)?;
-        self.offset = 0;
-        for (i, slot) in slots.iter_mut().enumerate() {
+        let mut views = self.buffers.views(py, n, self.nav)?;
+        for (i, slot) in views.slots.iter_mut().enumerate() {
             slot.now.write(&self.venv.observation(i), 0, true);
         }
-        Ok((0..n)
+        (self.offset, self.started) = (0, true);
+        let poses = (0..n)
             .map(|i| {
                 let p = self.venv.env(i).pose();
                 (p.x, p.y, p.yaw.to_degrees())
             })
-            .collect())
+            .collect();
+        Ok((self.buffers.windows[0].bind(py).clone(), poses))
     }
 
-    /// One step of every environment with `actions[i]` (0–9): writes the observations
-    /// (after any autoreset) into `buffers`, the rewards and flags into `rewards`,
-    /// `terminated`, `truncated`, and each step's `d_min`. The buffers are written while
-    /// the step runs, without the GIL: do not read them from another thread meanwhile.
-    /// Returns the frame at which the observations' windows now start (frames `offset..offset
-    /// + 4` of the laser and depth buffers; the last step's windows are unchanged until the
-    /// buffers wrap) and, for every environment whose episode ended, `(i, final_info)` (its
+    /// One step of every environment with `actions[i]` (0–9, an int64 array of any shape
+    /// holding one per environment): writes the observations (after any autoreset), the
+    /// rewards, `terminated`, `truncated` and `d_min` into the buffers. Returns Gymnasium's
+    /// `(observations, rewards, terminated, truncated, infos)` — the observations the views
+    /// of the windows' new position, the arrays the buffers themselves, `infos` with
+    /// `d_min` — and, for every environment whose episode ended, `(i, final_info)` (its
     /// final observation is row `i` of the `final_*` buffers).
-    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
     fn step<'py>(
         &mut self,
         py: Python<'py>,
-        actions: PyReadonlyArray1<'py, i64>,
-        mut buffers: Buffers<'py>,
-        mut rewards: PyReadwriteArray1<'py, f32>,
-        mut terminated: PyReadwriteArray1<'py, bool>,
-        mut truncated: PyReadwriteArray1<'py, bool>,
-        mut d_min: PyReadwriteArray1<'py, f32>,
-    ) -> PyResult<(usize, Vec<(usize, Bound<'py, PyDict>)>)> {
+        actions: numpy::PyReadonlyArrayDyn<'py, i64>,
+    ) -> PyResult<StepTuple<'py>> {
+        if !self.started {
+            return Err(PyRuntimeError::new_err("step() before reset(): call reset() first"));
+        }
         let n = self.venv.len();
-        let acts =
-            actions.as_slice().map_err(|e| PyValueError::new_err(format!("actions: {e}")))?;
-        if acts.len() != n {
+        if actions.len() != n {
             return Err(PyValueError::new_err(format!(
                 "{} actions for {n} environments",
-                acts.len()
+                actions.len()
             )));
         }
         self.actions.clear();
-        for (i, &a) in acts.iter().enumerate() {
+        for (i, &a) in actions.as_array().iter().enumerate() {
             let action =
                 usize::try_from(a).ok().and_then(mdrlat_core::Action::new).ok_or_else(|| {
                     PyValueError::new_err(format!("actions[{i}] = {a}: expected 0 to 9"))
                 })?;
             self.actions.push(action);
         }
-        for (name, len) in [
-            ("rewards", rewards.len()),
-            ("terminated", terminated.len()),
-            ("truncated", truncated.len()),
-            ("d_min", d_min.len()),
-        ] {
-            if len != n {
-                return Err(PyValueError::new_err(format!(
-                    "buffer '{name}' holds {len} values, expected {n}"
-                )));
-            }
-        }
-        let c = |e: numpy::AsSliceError| PyValueError::new_err(format!("buffers: {e}"));
-        let mut slots = env_slots(&mut buffers, n, self.nav)?;
-        let (rw, te, tr, dm) = (
-            rewards.as_slice_mut().map_err(c)?,
-            terminated.as_slice_mut().map_err(c)?,
-            truncated.as_slice_mut().map_err(c)?,
-            d_min.as_slice_mut().map_err(c)?,
-        );
+        let views = self.buffers.views(py, n, self.nav)?;
+        let BufferViews { mut slots, rewards, terminated, truncated, d_min } = views;
         // The windows slide on by a frame, or start again from the front of the buffers.
         let wrap = self.offset + 1 + FRAME_STACK > WINDOW_FRAMES;
         let offset = if wrap { 0 } else { self.offset + 1 };
@@ -542,14 +657,15 @@ impl VecEnv {
             }
             slot.now.write(now, offset, wrap || last.is_some());
         };
-        let (venv, actions) = (&mut self.venv, &self.actions);
+        let (venv, acts) = (&mut self.venv, &self.actions);
         let steps = py
-            .detach(|| venv.step_into(actions, &mut slots, &write).map(<[_]>::to_vec))
+            .detach(|| venv.step_into(acts, &mut slots, &write).map(<[_]>::to_vec))
             .map_err(sim_error)?;
         self.offset = offset;
         let mut ended = Vec::new();
         for (i, s) in steps.iter().enumerate() {
-            (rw[i], te[i], tr[i], dm[i]) = (s.reward, s.terminated, s.truncated, s.info.d_min);
+            (rewards[i], terminated[i], truncated[i], d_min[i]) =
+                (s.reward, s.terminated, s.truncated, s.info.d_min);
             if s.terminated || s.truncated {
                 let d = PyDict::new(py);
                 let p = s.info.pose;
@@ -559,7 +675,18 @@ impl VecEnv {
                 ended.push((i, d));
             }
         }
-        Ok((offset, ended))
+        let infos = PyDict::new(py);
+        infos.set_item("d_min", PyArray1::from_slice(py, &*d_min))?;
+        infos.set_item("_d_min", PyArray1::from_slice(py, &self.all))?;
+        let b = &self.buffers;
+        Ok((
+            b.windows[offset].bind(py).clone(),
+            b.rewards.bind(py).clone(),
+            b.terminated.bind(py).clone(),
+            b.truncated.bind(py).clone(),
+            infos,
+            ended,
+        ))
     }
 
     /// The environments.
