@@ -2,19 +2,21 @@
 
 The Rust `VecEnv` steps every environment with the GIL released and writes the
 observations into numpy buffers of its own, made once; one Rust call per step returns
-Gymnasium's tuple, so that little Python runs between steps while the worker threads wait. Each environment's laser scans and depth
-images live in a window buffer of 32 frames: an observation's ``laser`` and ``depth`` are
-views of 4 consecutive frames of it, and a step writes the one new frame and moves the view
-on, instead of copying all four (a whole stack only after a reset, and every 28 steps when
-the view starts again at the front); each environment's thread writes its own rows right
-after its step. The final observations of ended episodes are views of buffers too (row
-``i`` for environment ``i``, rewritten when its next episode ends). So the arrays ``step``
-returns are views into memory that later steps overwrite: copy what you keep.
+Gymnasium's tuple, so that little Python runs between steps while the worker threads
+wait. Each environment's laser scans and depth images live in a window buffer of 16
+frames: an observation's ``laser`` and ``depth`` are views of 4 consecutive frames of it,
+and a step writes the one new frame and moves the view on, instead of copying all four (a
+whole stack only after a reset, and every 12 steps when the view starts again at the
+front); each environment's thread writes its own rows right after its step. The final
+observations of ended episodes are views of buffers too (row ``i`` for environment ``i``,
+rewritten when its next episode ends). So the arrays ``step`` returns are views into
+memory that later steps overwrite: copy what you keep.
 
 Finished episodes restart in the same step (``AutoresetMode.SAME_STEP``): their final
 observation and info are in ``infos["final_obs"]`` / ``infos["final_info"]``, masked by
-``infos["_final_obs"]``, as Gymnasium's own vector environments write them. Seeding follows Gymnasium: ``reset(seed=s)``
-starts environment ``i`` as ``MdrlatEnv.reset(seed=s + i)`` would.
+``infos["_final_obs"]``, as Gymnasium's own vector environments write them. Seeding
+follows Gymnasium: ``reset(seed=s)`` starts environment ``i`` as ``MdrlatEnv.reset(seed=s +
+i)`` would.
 """
 
 from __future__ import annotations

@@ -164,6 +164,27 @@ def test_the_vector_env_steps_exactly_as_a_list_of_single_envs():
     vec.close()
 
 
+def test_the_vector_env_takes_actions_in_any_integer_form():
+    # int64 arrays go straight to Rust (any shape, strided or not); anything else is
+    # converted first. Both must step alike.
+    a, b = mdrlat.VectorEnv("train", num_envs=2), mdrlat.VectorEnv("train", num_envs=2)
+    a.reset(seed=4)
+    b.reset(seed=4)
+    rng = np.random.default_rng(2)
+    forms = [
+        lambda x: [int(v) for v in x],
+        lambda x: x.reshape(2, 1),
+        lambda x: np.repeat(x, 2)[::2],
+        lambda x: x.astype(np.int32),
+        tuple,
+    ]
+    for k in range(20):
+        acts = rng.integers(10, size=2)
+        oa, ra, *_ = a.step(acts)
+        ob, rb, *_ = b.step(forms[k % len(forms)](acts))
+        assert np.array_equal(ra, rb) and np.array_equal(oa["depth"], ob["depth"])
+
+
 def test_the_vector_env_refuses_bad_input():
     vec = mdrlat.VectorEnv("train", num_envs=2)
     with pytest.raises(RuntimeError, match="reset"):

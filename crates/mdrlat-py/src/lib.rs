@@ -247,8 +247,14 @@ impl Env {
 /// observation is a view of 4 consecutive frames, which slides on by one frame a step, so
 /// a step writes one new frame per environment instead of moving the whole stack (a full
 /// stack only after a reset, and when the window reaches the end: every
-/// `WINDOW_FRAMES − FRAME_STACK` steps).
-const WINDOW_FRAMES: usize = 32;
+/// `WINDOW_FRAMES − FRAME_STACK` steps). 16 frames with plain stores beat 32 with
+/// non-temporal ones on both CPUs measured (a step writes ~5 frames of 82 KB for 4
+/// environments; 16-frame windows, 5.2 MB for 4, stay in the last-level cache, where
+/// plain stores also leave the frames for the caller to read): `VectorEnv` 4096-step
+/// loops on an AMD EPYC Zen 4 VM 83.5–88.4 → 80.0–81.9 µs a step, `speed.py` 0.81 →
+/// 0.83–0.84 of `bench sim`; on a Sapphire Rapids Xeon plain stores were the faster at
+/// every size from 8 to 32 frames (`docs/python-speed.md`).
+const WINDOW_FRAMES: usize = 16;
 
 /// One observation's place in numpy buffers: `laser` and `depth` a whole stack (`frames`
 /// = 4) or an environment's window buffer (`frames` = [`WINDOW_FRAMES`]), `odom`, and
@@ -268,58 +274,14 @@ impl ObsSlot<'_> {
         for (stack, buf) in [(&obs.laser, &mut *self.laser), (&obs.depth, &mut *self.depth)] {
             let n = stack.frame_len();
             if full {
-                stack.write_stacked(&mut buf[offset * n..(offset + FRAME_STACK) * n], stream_copy);
+                let to = &mut buf[offset * n..(offset + FRAME_STACK) * n];
+                stack.write_stacked(to, |frame, to| to.copy_from_slice(frame));
             } else {
                 let newest = offset + FRAME_STACK - 1;
-                stream_copy(stack.latest(), &mut buf[newest * n..(newest + 1) * n]);
+                buf[newest * n..(newest + 1) * n].copy_from_slice(stack.latest());
             }
         }
-        stream_fence();
         write_vectors(obs, self.odom, self.goal);
-    }
-}
-
-/// `to.copy_from_slice(from)` with non-temporal stores on x86-64: the frames go to the
-/// window buffers (`N × 32` frames, 10 MB for 4 environments) at a place last written 28
-/// steps before, long out of this core's caches, where ordinary stores first read every
-/// line in (a 80 KB depth frame copied at ~7 GB/s, 15 % of a `VectorEnv.step` on one AMD
-/// EPYC Zen 4 VM); streaming stores write the lines without reading them. Followed by
-/// [`stream_fence`] before anything else may read the buffer.
-///
-/// # Panics
-/// If the lengths differ.
-fn stream_copy(from: &[f32], to: &mut [f32]) {
-    assert_eq!(from.len(), to.len(), "stream_copy: lengths differ");
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_loadu_ps, _mm_stream_ps};
-        // Plain stores up to the first 16-byte boundary of `to` (floats are 4-byte aligned).
-        let head = to.as_ptr().align_offset(16).min(to.len());
-        to[..head].copy_from_slice(&from[..head]);
-        let (from, to) = (&from[head..], &mut to[head..]);
-        let body = to.len() / 4 * 4;
-        for (f, t) in from[..body].chunks_exact(4).zip(to[..body].chunks_exact_mut(4)) {
-            // SAFETY: SSE is part of x86-64; `f` holds 4 floats and `t` 4 floats starting
-            // at a 16-byte boundary (every chunk after the head is 16 bytes on from it).
-            #[allow(unsafe_code)]
-            unsafe {
-                _mm_stream_ps(t.as_mut_ptr(), _mm_loadu_ps(f.as_ptr()));
-            }
-        }
-        to[body..].copy_from_slice(&from[body..]);
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    to.copy_from_slice(from);
-}
-
-/// Orders the streaming stores of [`stream_copy`] before every later store (the worker's
-/// "done" that hands the buffers back to Python): they are weakly ordered otherwise.
-fn stream_fence() {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: SSE is part of x86-64; a fence has no other effect.
-    #[allow(unsafe_code)]
-    unsafe {
-        std::arch::x86_64::_mm_sfence();
     }
 }
 
@@ -331,7 +293,7 @@ struct EnvSlot<'a> {
 }
 
 /// The numpy arrays a [`VecEnv`] writes into, made with it (float32 and bool, C order):
-/// the frame windows `laser` `(N, 32, 512)` and `depth` `(N, 32, 128, 160)` (see
+/// the frame windows `laser` `(N, 16, 512)` and `depth` `(N, 16, 128, 160)` (see
 /// [`WINDOW_FRAMES`]), `odom` `(N, 6)`, `goal` `(N, 3)` or `(0, 3)`; the final
 /// observations of ended episodes, `final_laser` `(N, 4, 512)`, `final_depth` `(N, 4, 128,
 /// 160)`, `final_odom`, `final_goal`; a step's `rewards`, `terminated`, `truncated` and
