@@ -4,7 +4,7 @@
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner};
 use crate::replay::{Batch, DepthLayout, ReplayBuffer, Transition};
-use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Observation, Rng};
+use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Observation, Policy, Rng};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::config::Task;
@@ -153,9 +153,10 @@ pub fn infer_ms(
     })
 }
 
-/// Median milliseconds of one decision (batch 1) of a fresh `variant` policy on one core
-/// of the CPU backend, with its linear layers' weights in bfloat16 when `bf16`
-/// ([`crate::GreedyPolicy::with_bf16_weights`]), and the samples.
+/// Median milliseconds of one decision of a fresh `variant` policy on one core of the CPU
+/// backend — `Policy::act` on one observation, as the ROS node calls it: the inputs
+/// normalised, the network, the greedy action — with its linear layers' weights in
+/// bfloat16 when `bf16` ([`crate::GreedyPolicy::with_bf16_weights`]), and the samples.
 ///
 /// # Errors
 /// The CPU lacks the bfloat16 kernel, or the policy's thread cannot start.
@@ -168,10 +169,10 @@ pub fn decision_ms(
     if bf16 {
         policy = policy.with_bf16_weights()?;
     }
-    let b = random_batch(variant, 1, 2);
-    let inputs = Inputs { size: 1, laser: b.laser, depth: b.depth, goal: Vec::new() };
+    let obs = random_observations(1, 2);
+    let mut actions = Vec::new();
     Ok(median_ms(min_time, || {
-        let _ = policy.q_values(&inputs);
+        let _ = policy.act(&[&obs[0]], &[0], &mut actions);
     }))
 }
 

@@ -10,6 +10,7 @@ use mdrlat_core::{
     greedy_actions, normalize_depth, normalize_goal, normalize_laser,
 };
 use mdrlat_nn::burn::prelude::*;
+use mdrlat_nn::host::OneDecision;
 use mdrlat_nn::{QNet, QNetConfig, Variant};
 use mdrlat_sim::config::Task;
 use std::path::{Path, PathBuf};
@@ -29,6 +30,9 @@ pub struct GreedyPolicy {
     /// The network prepared once for the CPU's host kernels (on `flex`; `None` elsewhere),
     /// its linear layers' weights in bfloat16 with [`GreedyPolicy::with_bf16_weights`].
     host: Option<mdrlat_nn::host::HostNet>,
+    /// Its value head's norms, for single decisions without that head
+    /// (`HostNet::decide_one`).
+    value_bound: Option<mdrlat_nn::host::ValueBound>,
 }
 
 impl std::fmt::Debug for GreedyPolicy {
@@ -207,6 +211,7 @@ impl GreedyPolicy {
     ) -> Result<Self, String> {
         // A one-thread policy runs a single decision's network on the calling thread.
         let host = net.host(&config).map(|h| if threads <= 1 { h.on_calling_thread() } else { h });
+        let value_bound = host.as_ref().map(mdrlat_nn::host::HostNet::value_bound);
         Ok(Self {
             config,
             net,
@@ -216,6 +221,7 @@ impl GreedyPolicy {
             forward_batch: None,
             inputs: Vec::new(),
             host,
+            value_bound,
         })
     }
 
@@ -306,6 +312,43 @@ impl GreedyPolicy {
         if self.on_calling_thread(inputs.size) { forward() } else { self.pool.install(forward) }
     }
 
+    /// A single decision on the host kernels, which reads the value head's weights only
+    /// where the advantages leave the action in doubt (`HostNet::decide_one`: the best
+    /// advantage leads by more than eq. (11)'s rounding can move, all but near-ties), with
+    /// the same action as the Q-values' greedy one. `false` (nothing decided) off the host
+    /// kernels.
+    fn decide_one(
+        &mut self,
+        batch: &[&Observation],
+        out: &mut Vec<Action>,
+    ) -> Result<bool, PolicyError> {
+        let (Some(host), Some(bound)) = (&self.host, &self.value_bound) else {
+            return Ok(false);
+        };
+        if self.inputs.is_empty() {
+            self.inputs.push(Inputs::default());
+        }
+        let inputs = &mut self.inputs[0];
+        observation_inputs(batch, &self.config, inputs)?;
+        let inputs = &*inputs;
+        let decide = || Ok(host.decide_one(&inputs.host(), bound));
+        let on_caller = self.pool.current_num_threads() == 1;
+        let decision = catch_panic("the network backend", || {
+            if on_caller { decide() } else { self.pool.install(decide) }
+        })?;
+        match decision {
+            OneDecision::Action(best) => {
+                out.clear();
+                out.push(
+                    Action::new(best)
+                        .ok_or(PolicyError::Backend(format!("action {best} out of range")))?,
+                );
+            }
+            OneDecision::QValues(q) => greedy_actions(&q, 1, out)?,
+        }
+        Ok(true)
+    }
+
     /// Whether a forward of `rows` rows runs on the calling thread rather than in the
     /// pool: one row, one thread, on the host kernels (see `HostNet::on_calling_thread`;
     /// handing a decision to the pool's thread and waiting for it costs ~0.06 ms).
@@ -336,6 +379,9 @@ impl Policy for GreedyPolicy {
             return Ok(());
         }
         let rows = self.forward_batch.unwrap_or(batch.len());
+        if rows == 1 && batch.len() == 1 && self.decide_one(batch, out)? {
+            return Ok(());
+        }
         let chunks: Vec<&[&Observation]> = batch.chunks(rows).collect();
         if self.inputs.len() < chunks.len() {
             self.inputs.resize_with(chunks.len(), Inputs::default);

@@ -192,3 +192,25 @@ fn a_single_decision_on_the_calling_thread_decides_as_the_pool_does() {
         assert_eq!(a, b, "{variant}");
     }
 }
+
+/// One observation's decision, which may skip the value head (`HostNet::decide_one`),
+/// is the greedy action of its Q-values, for every variant and a goal input.
+#[test]
+fn a_single_decision_is_the_greedy_action_of_its_q_values() {
+    let mut rng = Rng::seed_from_u64(8);
+    let observations: Vec<Observation> = (0..6).map(|_| observation(&mut rng)).collect();
+    for variant in Variant::ALL {
+        let mut policy =
+            GreedyPolicy::untrained(variant, Task::Avoid, 4, &Device::flex(), 1).expect("policy");
+        let mut inputs = Inputs::default();
+        for obs in &observations {
+            observation_inputs(&[obs], policy.config(), &mut inputs).expect("inputs");
+            let mut want = Vec::new();
+            mdrlat_core::greedy_actions(&policy.q_values(&inputs).expect("q"), 1, &mut want)
+                .expect("finite");
+            let mut got = Vec::new();
+            policy.act(&[obs], &[0], &mut got).expect("acts");
+            assert_eq!(got, want, "{variant}");
+        }
+    }
+}

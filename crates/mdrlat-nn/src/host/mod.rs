@@ -544,6 +544,44 @@ impl HostNet {
 
     /// [`HostNet::forward_parts`]' stages.
     fn forward_stages<'a>(&self, parts: &[HostInputs<'a>], velocity_rows: usize) -> Tape<'a> {
+        let mut t = self.trunk(parts);
+        let (b, width) = (t.batch, self.config.representation());
+        let heads: Vec<(usize, usize)> = (0..self.heads.len())
+            .map(|i| (i, if i < 2 { b } else { velocity_rows.min(b) }))
+            .filter(|&(_, rows)| rows > 0)
+            .collect();
+        let h = &t.h;
+        let head = |&(i, rows): &(usize, usize)| self.head_forward(i, &h[..rows * width], rows);
+        let outs: Vec<(Vec<f32>, Vec<f32>)> = if gemm::may_split() {
+            heads.par_iter().map(head).collect()
+        } else {
+            heads.iter().map(head).collect()
+        };
+        t.times.lap("heads");
+        t.q = dueling(&outs[0].1, &outs[1].1, b);
+        for (i, (u, o)) in outs.into_iter().enumerate() {
+            if i == 2 {
+                t.velocity = o;
+            }
+            t.hidden.push(u);
+        }
+        t.velocity_rows = velocity_rows.min(b);
+        t
+    }
+
+    /// Head `i` (value, advantage, velocity) on `rows` rows of the representation `h`: its
+    /// hidden activations and its outputs.
+    fn head_forward(&self, i: usize, h: &[f32], rows: usize) -> (Vec<f32>, Vec<f32>) {
+        let [hidden, out] = &self.heads[i];
+        let mut u = hidden.forward(h, rows);
+        relu_in_place(&mut u);
+        let o = out.forward(&u, rows);
+        (u, o)
+    }
+
+    /// The forward pass up to the heads: the streams, the fusion and the representation
+    /// `h` of the stacked `parts`, on a new tape.
+    fn trunk<'a>(&self, parts: &[HostInputs<'a>]) -> Tape<'a> {
         assert!(
             !self.heads_released() && !self.fusion_released(),
             "forward pass of a network after release_heads / release_fusion"
@@ -588,32 +626,6 @@ impl HostNet {
             pieces.push((&goal, cfg.goal_dim));
         }
         t.h = concat_columns(&pieces, b, width);
-        let heads: Vec<(usize, usize)> = (0..self.heads.len())
-            .map(|i| (i, if i < 2 { b } else { velocity_rows.min(b) }))
-            .filter(|&(_, rows)| rows > 0)
-            .collect();
-        let h = &t.h;
-        let head = |&(i, rows): &(usize, usize)| {
-            let [hidden, out] = &self.heads[i];
-            let mut u = hidden.forward(&h[..rows * width], rows);
-            relu_in_place(&mut u);
-            let o = out.forward(&u, rows);
-            (u, o)
-        };
-        let outs: Vec<(Vec<f32>, Vec<f32>)> = if gemm::may_split() {
-            heads.par_iter().map(head).collect()
-        } else {
-            heads.iter().map(head).collect()
-        };
-        t.times.lap("heads");
-        t.q = dueling(&outs[0].1, &outs[1].1, b);
-        for (i, (u, o)) in outs.into_iter().enumerate() {
-            if i == 2 {
-                t.velocity = o;
-            }
-            t.hidden.push(u);
-        }
-        t.velocity_rows = velocity_rows.min(b);
         t
     }
 
@@ -831,6 +843,47 @@ impl HostNet {
     /// Q-values alone, `[B, actions]` (no auxiliary head, nothing kept).
     pub fn q_values(&self, x: &HostInputs<'_>) -> Vec<f32> {
         self.forward(x, false).q
+    }
+
+    /// The value head's norms that [`HostNet::decide_one`] bounds its output by:
+    /// one pass over its weights (~8 MB for MDRLAT), valid while they do not change.
+    pub fn value_bound(&self) -> ValueBound {
+        let [hidden, out] = &self.heads[0];
+        // Rounding to bfloat16 moves a weight by at most 2⁻⁹ of itself.
+        let bf16 = 1.0 + 2f64.powi(-8);
+        ValueBound {
+            hidden_w: norm(hidden.weight.data()) * bf16,
+            hidden_b: norm(hidden.bias.data()),
+            hidden_k: hidden.dims().0 + 1,
+            out_w: norm(out.weight.data()) * bf16,
+            out_b: norm(out.bias.data()),
+            out_k: out.dims().0 + 1,
+        }
+    }
+
+    /// One observation's decision (`x.batch` = 1): its greedy action from the advantage
+    /// head alone where that is provably the action [`mdrlat_core::greedy_actions`] picks
+    /// from the Q-values (`bound`: this network's [`HostNet::value_bound`]), else its
+    /// Q-values, the same bits as [`HostNet::q_values`] (the value head then runs on the
+    /// representation already computed). Eq. (11) adds the same `V − mean(A)` to every
+    /// advantage, so only the rounding of those two f32 operations could reorder actions;
+    /// the value head, a third of a decision's weight bytes after the fusion, is skipped
+    /// whenever the best advantage leads by more than that rounding can move (see
+    /// [`ValueBound::decides`]).
+    ///
+    /// # Panics
+    /// If `x` holds more than one row, or an input has the wrong size.
+    pub fn decide_one(&self, x: &HostInputs<'_>, bound: &ValueBound) -> OneDecision {
+        assert_eq!(x.batch, 1, "decide_one: one observation");
+        let run = || {
+            let t = self.trunk(std::slice::from_ref(x));
+            let advantage = self.head_forward(1, &t.h, 1).1;
+            if let Some(best) = bound.decides(norm(&t.h), &advantage) {
+                return OneDecision::Action(best);
+            }
+            OneDecision::QValues(dueling(&self.head_forward(0, &t.h, 1).1, &advantage, 1))
+        };
+        if self.sequential { gemm::on_this_thread(run) } else { run() }
     }
 
     /// One convolution + ReLU on channel-last activations; keeps its patches in `cols`.
@@ -1197,6 +1250,76 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
         }
     }
     acc.iter().sum::<f32>() + tail
+}
+
+/// What [`HostNet::decide_one`] found.
+#[derive(Debug, Clone, PartialEq)]
+pub enum OneDecision {
+    /// The greedy action, decided from the advantages alone.
+    Action(usize),
+    /// The Q-values (`[actions]`), for the caller's greedy rule.
+    QValues(Vec<f32>),
+}
+
+/// The Euclidean norm of `v`, in f64.
+fn norm(v: &[f32]) -> f64 {
+    v.iter().map(|&x| f64::from(x) * f64::from(x)).sum::<f64>().sqrt()
+}
+
+/// Norms of a network's value head (hidden layer `u = relu(W h + b)`, output `V = w · u +
+/// c`) that bound `|V|` for a representation of a given norm; see [`ValueBound::decides`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ValueBound {
+    /// `‖W‖_F` (with room for bfloat16 rounding), `‖b‖`, and the hidden layer's inputs + 1.
+    hidden_w: f64,
+    hidden_b: f64,
+    hidden_k: usize,
+    /// `‖w‖`, `|c|`, and the output layer's inputs + 1.
+    out_w: f64,
+    out_b: f64,
+    out_k: usize,
+}
+
+impl ValueBound {
+    /// The index of the largest of `advantage` if, for a representation of norm `h_norm`,
+    /// eq. (11) in f32 — `q_a = (V + A_a) − mean(A)` — must make it the strictly largest
+    /// Q-value, whatever `V` is within the bound; else `None`.
+    ///
+    /// The bound: `‖W h + b‖ ≤ ‖W‖_F ‖h‖ + ‖b‖`, and f32 sums of `k` products are off by at
+    /// most `γ_k = k·u / (1 − k·u)` of the sum of their magnitudes (`u = 2⁻²⁴`), so the
+    /// computed `|u|` and `|V|` stay below `Vb` (ReLU only shrinks; 1 % on top). Rounding
+    /// is monotone, so `A_i > A_j` gives `q_i ≥ q_j`; `q_i > q_j` for certain once `A_i −
+    /// A_j` exceeds the two roundings, `2u(|V| + |A|)` for `V + A` and `2u(|V + A| +
+    /// |mean|)` for the subtraction — at most `4u(Vb + 3·max|A|)`; the margin asked is twice
+    /// that. Non-finite advantages or a non-finite or huge bound give `None`, so a network
+    /// whose Q-values would not be finite still takes the path that reports them.
+    pub fn decides(&self, h_norm: f64, advantage: &[f32]) -> Option<usize> {
+        const U: f64 = 1.0 / 16_777_216.0;
+        let gamma = |k: usize| {
+            let ku = k as f64 * U;
+            ku / (1.0 - ku)
+        };
+        let hidden = (1.0 + gamma(self.hidden_k)) * (self.hidden_w * h_norm + self.hidden_b);
+        let vb = 1.01 * (1.0 + gamma(self.out_k)) * (self.out_w * hidden + self.out_b);
+        if !advantage.iter().all(|a| a.is_finite()) {
+            return None;
+        }
+        let amax = advantage.iter().fold(0.0f64, |m, &a| m.max(f64::from(a).abs()));
+        let scale = vb + 3.0 * amax;
+        if !(scale.is_finite() && scale < 1e37) {
+            return None;
+        }
+        let margin = 8.0 * U * scale + 1e-37;
+        let (best, top) = advantage
+            .iter()
+            .enumerate()
+            .fold((0, f32::NEG_INFINITY), |b, (i, &a)| if a > b.1 { (i, a) } else { b });
+        let clear = advantage
+            .iter()
+            .enumerate()
+            .all(|(i, &a)| i == best || f64::from(top) - f64::from(a) > margin);
+        clear.then_some(best)
+    }
 }
 
 /// Paper eq. (11) on host rows: `(V + A) − mean(A)`, burn's order of operations.

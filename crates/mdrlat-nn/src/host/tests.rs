@@ -202,3 +202,62 @@ fn transpose_into_matches_the_definition() {
         assert_eq!(dx, sum, "{din}x{batch} accumulated");
     }
 }
+
+/// A single decision from the advantage head alone is the Q-values' greedy action whenever
+/// it is offered, for every variant (and a goal input), and it is offered for most inputs;
+/// otherwise the Q-values are those of the whole forward, bit for bit (also with a bound
+/// that never lets the advantages decide).
+#[test]
+fn the_advantage_head_alone_decides_as_the_q_values_do() {
+    let device = Device::flex();
+    let cases = Variant::ALL.iter().map(|&v| (v, 0)).chain([(Variant::Mdrlat, 3)]);
+    for (variant, goal_dim) in cases {
+        let config = QNetConfig::new(variant).with_goal_dim(goal_dim);
+        let host = config.init(&device).host(&config).expect("host");
+        let bound = host.value_bound();
+        let mut decided = 0;
+        for seed in 0..8 {
+            let case = Case::new(variant, goal_dim, 1, 100 + seed);
+            let q = host.q_values(&case.inputs());
+            let mut want = Vec::new();
+            mdrlat_core::greedy_actions(&q, 1, &mut want).expect("finite");
+            match host.decide_one(&case.inputs(), &bound) {
+                OneDecision::Action(best) => {
+                    assert_eq!(best, want[0].index(), "{variant}, goal {goal_dim}, seed {seed}");
+                    decided += 1;
+                }
+                OneDecision::QValues(got) => assert_eq!(got, q, "{variant}, seed {seed}"),
+            }
+        }
+        assert!(decided >= 4, "{variant}: only {decided} of 8 decided without the value head");
+        let never = ValueBound { hidden_w: f64::INFINITY, ..bound };
+        let case = Case::new(variant, goal_dim, 1, 99);
+        let want = OneDecision::QValues(host.q_values(&case.inputs()));
+        assert_eq!(host.decide_one(&case.inputs(), &never), want, "{variant}");
+    }
+}
+
+/// Where eq. (11)'s rounding could reorder two advantages, nothing is decided: here `V +
+/// A` rounds two different advantages to the same Q-value and the greedy rule then picks
+/// the first, not the larger. Non-finite inputs decide nothing either.
+#[test]
+fn the_value_bound_refuses_what_rounding_could_reorder() {
+    let bound =
+        ValueBound { hidden_w: 1.0, hidden_b: 0.0, hidden_k: 5, out_w: 1.0, out_b: 0.0, out_k: 5 };
+    // |V| ≤ ~1000 for a representation of norm 1000; an f32 step there is 6.1e-5.
+    let close = [0.0, 3e-5, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let q = dueling(&[1000.0], &close, 1);
+    let mut picked = Vec::new();
+    mdrlat_core::greedy_actions(&q, 1, &mut picked).expect("finite");
+    assert_eq!(picked[0].index(), 0, "the rounding ties q_0 and q_1: {q:?}");
+    assert_eq!(bound.decides(1000.0, &close), None);
+    // A lead beyond the rounding decides; the same lead at a larger |V| does not.
+    let clear = [0.0, 2e-3, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    assert_eq!(bound.decides(1000.0, &clear), Some(1));
+    assert_eq!(bound.decides(1e6, &clear), None);
+    let mut nan = clear;
+    nan[4] = f32::NAN;
+    assert_eq!(bound.decides(1000.0, &nan), None);
+    assert_eq!(bound.decides(f64::INFINITY, &clear), None);
+    assert_eq!(bound.decides(f64::NAN, &clear), None);
+}
