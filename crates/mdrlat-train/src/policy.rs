@@ -322,6 +322,7 @@ impl GreedyPolicy {
         batch: &[&Observation],
         out: &mut Vec<Action>,
     ) -> Result<bool, PolicyError> {
+        let on_caller = self.on_calling_thread(1);
         let (Some(host), Some(bound)) = (&self.host, &self.value_bound) else {
             return Ok(false);
         };
@@ -332,17 +333,15 @@ impl GreedyPolicy {
         observation_inputs(batch, &self.config, inputs)?;
         let inputs = &*inputs;
         let decide = || Ok(host.decide_one(&inputs.host(), bound));
-        let on_caller = self.pool.current_num_threads() == 1;
         let decision = catch_panic("the network backend", || {
             if on_caller { decide() } else { self.pool.install(decide) }
         })?;
         match decision {
             OneDecision::Action(best) => {
                 out.clear();
-                out.push(
-                    Action::new(best)
-                        .ok_or(PolicyError::Backend(format!("action {best} out of range")))?,
-                );
+                let action = Action::new(best)
+                    .ok_or_else(|| PolicyError::Backend(format!("action {best} out of range")))?;
+                out.push(action);
             }
             OneDecision::QValues(q) => greedy_actions(&q, 1, out)?,
         }
