@@ -292,24 +292,87 @@ struct EnvSlot<'a> {
     last: ObsSlot<'a>,
 }
 
-/// The numpy arrays a [`VecEnv`] writes into, made with it (float32 and bool, C order):
-/// the frame windows `laser` `(N, 16, 512)` and `depth` `(N, 16, 128, 160)` (see
-/// [`WINDOW_FRAMES`]), `odom` `(N, 6)`, `goal` `(N, 3)` or `(0, 3)`; the final
-/// observations of ended episodes, `final_laser` `(N, 4, 512)`, `final_depth` `(N, 4, 128,
-/// 160)`, `final_odom`, `final_goal`; a step's `rewards`, `terminated`, `truncated` and
-/// `d_min`, `(N,)` each; and the observation dict of every window position (views of the
-/// windows). Made once instead of passed in with every step: extracting 13 numpy arguments
-/// and checking their borrows took ~1.5 µs a call, in the serial stretch between steps
-/// during which the worker threads wait.
-struct VecBuffers {
+/// One observation of each of N environments as numpy arrays (float32, C order): `laser`
+/// `(N, F, 512)`, `depth` `(N, F, 128, 160)` with `F` frames each, `odom` `(N, 6)`, and
+/// `goal` `(N, 3)` or `(0, 3)` without the navigation task.
+struct ObsArrays {
     laser: Py<PyArray3<f32>>,
     depth: Py<PyArray4<f32>>,
     odom: Py<PyArray2<f32>>,
     goal: Py<PyArray2<f32>>,
-    final_laser: Py<PyArray3<f32>>,
-    final_depth: Py<PyArray4<f32>>,
-    final_odom: Py<PyArray2<f32>>,
-    final_goal: Py<PyArray2<f32>>,
+    /// Frames per environment (`F`), and whether there are goals.
+    frames: usize,
+    nav: bool,
+}
+
+impl ObsArrays {
+    fn zeros(py: Python<'_>, n: usize, frames: usize, nav: bool) -> Self {
+        Self {
+            laser: PyArray3::zeros(py, [n, frames, LASER_BEAMS], false).unbind(),
+            depth: PyArray4::zeros(py, [n, frames, DEPTH_ROWS, DEPTH_COLS], false).unbind(),
+            odom: PyArray2::zeros(py, [n, 2 * ODOM_HISTORY], false).unbind(),
+            goal: PyArray2::zeros(py, [if nav { n } else { 0 }, GOAL_DIM], false).unbind(),
+            frames,
+            nav,
+        }
+    }
+
+    /// Each environment's rows, checked against `n` environments; errors name the arrays
+    /// `{prefix}laser` and so on.
+    ///
+    /// # Safety
+    /// As [`values`]: nothing else may use the arrays while the slots live.
+    #[allow(unsafe_code)]
+    unsafe fn slots<'a>(
+        &'a self,
+        py: Python<'a>,
+        prefix: &str,
+        n: usize,
+    ) -> PyResult<Vec<ObsSlot<'a>>> {
+        let (f, goal) = (self.frames, if self.nav { GOAL_DIM } else { 0 });
+        // SAFETY: the caller's promise; each array is taken once.
+        let (laser, depth, odom, goals) = unsafe {
+            (
+                values(py, (prefix, "laser"), &self.laser, n * f * LASER_BEAMS)?,
+                values(py, (prefix, "depth"), &self.depth, n * f * DEPTH_LEN)?,
+                values(py, (prefix, "odom"), &self.odom, n * 2 * ODOM_HISTORY)?,
+                values(py, (prefix, "goal"), &self.goal, n * goal)?,
+            )
+        };
+        // `chunks_exact_mut(0)` panics: goal-less arrays give every slot an empty goal.
+        let mut goals = goals.chunks_exact_mut(goal.max(1));
+        Ok(laser
+            .chunks_exact_mut(f * LASER_BEAMS)
+            .zip(depth.chunks_exact_mut(f * DEPTH_LEN))
+            .zip(odom.chunks_exact_mut(2 * ODOM_HISTORY))
+            .map(|((laser, depth), odom)| ObsSlot {
+                laser,
+                depth,
+                odom,
+                goal: goals.next().unwrap_or_default(),
+            })
+            .collect())
+    }
+
+    /// The arrays into `d`, their names prefixed by `prefix`.
+    fn add_to(&self, py: Python<'_>, d: &Bound<'_, PyDict>, prefix: &str) -> PyResult<()> {
+        d.set_item(format!("{prefix}laser"), self.laser.bind(py))?;
+        d.set_item(format!("{prefix}depth"), self.depth.bind(py))?;
+        d.set_item(format!("{prefix}odom"), self.odom.bind(py))?;
+        d.set_item(format!("{prefix}goal"), self.goal.bind(py))
+    }
+}
+
+/// The numpy arrays a [`VecEnv`] writes into, made with it: the current observations
+/// (`laser` and `depth` frame windows of [`WINDOW_FRAMES`] frames each); the final
+/// observations of ended episodes (`final_*`, whole stacks); a step's `rewards`,
+/// `terminated`, `truncated` and `d_min`, `(N,)` each; and the observation dict of every
+/// window position (views of the windows). Made once instead of passed in with every step:
+/// extracting 13 numpy arguments and checking their borrows took ~1.5 µs a call, in the
+/// serial stretch between steps during which the worker threads wait.
+struct VecBuffers {
+    now: ObsArrays,
+    last: ObsArrays,
     rewards: Py<PyArray1<f32>>,
     terminated: Py<PyArray1<bool>>,
     truncated: Py<PyArray1<bool>>,
@@ -336,16 +399,16 @@ struct BufferViews<'a> {
 #[allow(unsafe_code, clippy::mut_from_ref)]
 unsafe fn values<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
     py: Python<'a>,
-    name: &str,
+    (prefix, key): (&str, &str),
     a: &'a Py<numpy::PyArray<T, D>>,
     len: usize,
 ) -> PyResult<&'a mut [T]> {
     // SAFETY: the caller's promise.
     let s = unsafe { a.bind(py).as_slice_mut() }
-        .map_err(|e| PyRuntimeError::new_err(format!("buffer '{name}': {e}")))?;
+        .map_err(|e| PyRuntimeError::new_err(format!("buffer '{prefix}{key}': {e}")))?;
     if s.len() != len {
         return Err(PyRuntimeError::new_err(format!(
-            "buffer '{name}' holds {} values, expected {len}",
+            "buffer '{prefix}{key}' holds {} values, expected {len}",
             s.len()
         )));
     }
@@ -355,31 +418,25 @@ unsafe fn values<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
 impl VecBuffers {
     /// Zeroed buffers for `n` environments (goals only with `nav`).
     fn new(py: Python<'_>, n: usize, nav: bool) -> PyResult<Self> {
-        let (w, s, goals) = (WINDOW_FRAMES, FRAME_STACK, if nav { n } else { 0 });
         let b = Self {
-            laser: PyArray3::zeros(py, [n, w, LASER_BEAMS], false).unbind(),
-            depth: PyArray4::zeros(py, [n, w, DEPTH_ROWS, DEPTH_COLS], false).unbind(),
-            odom: PyArray2::zeros(py, [n, 2 * ODOM_HISTORY], false).unbind(),
-            goal: PyArray2::zeros(py, [goals, GOAL_DIM], false).unbind(),
-            final_laser: PyArray3::zeros(py, [n, s, LASER_BEAMS], false).unbind(),
-            final_depth: PyArray4::zeros(py, [n, s, DEPTH_ROWS, DEPTH_COLS], false).unbind(),
-            final_odom: PyArray2::zeros(py, [n, 2 * ODOM_HISTORY], false).unbind(),
-            final_goal: PyArray2::zeros(py, [goals, GOAL_DIM], false).unbind(),
+            now: ObsArrays::zeros(py, n, WINDOW_FRAMES, nav),
+            last: ObsArrays::zeros(py, n, FRAME_STACK, nav),
             rewards: PyArray1::zeros(py, n, false).unbind(),
             terminated: PyArray1::zeros(py, n, false).unbind(),
             truncated: PyArray1::zeros(py, n, false).unbind(),
             d_min: PyArray1::zeros(py, n, false).unbind(),
             windows: Vec::new(),
         };
-        let windows = (0..=w - s)
+        let windows = (0..=WINDOW_FRAMES - FRAME_STACK)
             .map(|k| {
-                let frames = (PySlice::full(py), PySlice::new(py, k as isize, (k + s) as isize, 1));
+                let end = (k + FRAME_STACK) as isize;
+                let frames = (PySlice::full(py), PySlice::new(py, k as isize, end, 1));
                 let d = PyDict::new(py);
-                d.set_item("laser", b.laser.bind(py).get_item(frames.clone())?)?;
-                d.set_item("depth", b.depth.bind(py).get_item(frames)?)?;
-                d.set_item("odom", b.odom.bind(py))?;
+                d.set_item("laser", b.now.laser.bind(py).get_item(frames.clone())?)?;
+                d.set_item("depth", b.now.depth.bind(py).get_item(frames)?)?;
+                d.set_item("odom", b.now.odom.bind(py))?;
                 if nav {
-                    d.set_item("goal", b.goal.bind(py))?;
+                    d.set_item("goal", b.now.goal.bind(py))?;
                 }
                 Ok(d.unbind())
             })
@@ -387,78 +444,33 @@ impl VecBuffers {
         Ok(Self { windows, ..b })
     }
 
-    /// Every buffer as a Rust slice, checked against `n` environments (and `nav`).
+    /// Every buffer as a Rust slice, checked against `n` environments.
     ///
     /// Sound because these arrays are this object's own: `&mut self` keeps Rust from
     /// taking a second set, and the class documents that no other thread may touch them
     /// during a call (the GIL is released then), as with any numpy buffer a native
     /// function fills.
     #[allow(unsafe_code)]
-    fn views<'a>(&'a mut self, py: Python<'a>, n: usize, nav: bool) -> PyResult<BufferViews<'a>> {
-        let (laser, depth, odom) = (LASER_BEAMS, DEPTH_LEN, 2 * ODOM_HISTORY);
-        let goal = if nav { GOAL_DIM } else { 0 };
-        let (w, s) = (WINDOW_FRAMES, FRAME_STACK);
+    fn views<'a>(&'a mut self, py: Python<'a>, n: usize) -> PyResult<BufferViews<'a>> {
         // SAFETY: see above; each array is taken once.
-        let v = unsafe {
-            (
-                values(py, "laser", &self.laser, n * w * laser)?,
-                values(py, "depth", &self.depth, n * w * depth)?,
-                values(py, "odom", &self.odom, n * odom)?,
-                values(py, "goal", &self.goal, n * goal)?,
-                values(py, "final_laser", &self.final_laser, n * s * laser)?,
-                values(py, "final_depth", &self.final_depth, n * s * depth)?,
-                values(py, "final_odom", &self.final_odom, n * odom)?,
-                values(py, "final_goal", &self.final_goal, n * goal)?,
-                BufferViews {
-                    slots: Vec::new(),
-                    rewards: values(py, "rewards", &self.rewards, n)?,
-                    terminated: values(py, "terminated", &self.terminated, n)?,
-                    truncated: values(py, "truncated", &self.truncated, n)?,
-                    d_min: values(py, "d_min", &self.d_min, n)?,
-                },
-            )
-        };
-        let (now_l, now_d, now_o, now_g, last_l, last_d, last_o, last_g, mut views) = v;
-        // `chunks_exact_mut(0)` panics: goal-less buffers give every slot an empty goal.
-        fn rows(s: &mut [f32], len: usize) -> std::slice::ChunksExactMut<'_, f32> {
-            s.chunks_exact_mut(len.max(1))
-        }
-        let (mut now_g, mut last_g) = (rows(now_g, goal), rows(last_g, goal));
-        views.slots = rows(now_l, w * laser)
-            .zip(rows(now_d, w * depth))
-            .zip(rows(now_o, odom))
-            .zip(rows(last_l, s * laser))
-            .zip(rows(last_d, s * depth))
-            .zip(rows(last_o, odom))
-            .map(|(((((nl, nd), no), ll), ld), lo)| EnvSlot {
-                now: ObsSlot {
-                    laser: nl,
-                    depth: nd,
-                    odom: no,
-                    goal: now_g.next().unwrap_or_default(),
-                },
-                last: ObsSlot {
-                    laser: ll,
-                    depth: ld,
-                    odom: lo,
-                    goal: last_g.next().unwrap_or_default(),
-                },
+        unsafe {
+            let now = self.now.slots(py, "", n)?;
+            let last = self.last.slots(py, "final_", n)?;
+            Ok(BufferViews {
+                slots: now.into_iter().zip(last).map(|(now, last)| EnvSlot { now, last }).collect(),
+                rewards: values(py, ("", "rewards"), &self.rewards, n)?,
+                terminated: values(py, ("", "terminated"), &self.terminated, n)?,
+                truncated: values(py, ("", "truncated"), &self.truncated, n)?,
+                d_min: values(py, ("", "d_min"), &self.d_min, n)?,
             })
-            .collect();
-        Ok(views)
+        }
     }
 
     /// The arrays by name, for Python (`final_*` for the final observations).
     fn dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        d.set_item("laser", self.laser.bind(py))?;
-        d.set_item("depth", self.depth.bind(py))?;
-        d.set_item("odom", self.odom.bind(py))?;
-        d.set_item("goal", self.goal.bind(py))?;
-        d.set_item("final_laser", self.final_laser.bind(py))?;
-        d.set_item("final_depth", self.final_depth.bind(py))?;
-        d.set_item("final_odom", self.final_odom.bind(py))?;
-        d.set_item("final_goal", self.final_goal.bind(py))?;
+        self.now.add_to(py, &d, "")?;
+        self.last.add_to(py, &d, "final_")?;
         d.set_item("rewards", self.rewards.bind(py))?;
         d.set_item("terminated", self.terminated.bind(py))?;
         d.set_item("truncated", self.truncated.bind(py))?;
@@ -561,7 +573,7 @@ impl VecEnv {
             Ok(())
         })
         .map_err(sim_error)?;
-        let mut views = self.buffers.views(py, n, self.nav)?;
+        let mut views = self.buffers.views(py, n)?;
         for (i, slot) in views.slots.iter_mut().enumerate() {
             slot.now.write(&self.venv.observation(i), 0, true);
         }
@@ -605,7 +617,7 @@ impl VecEnv {
                 })?;
             self.actions.push(action);
         }
-        let views = self.buffers.views(py, n, self.nav)?;
+        let views = self.buffers.views(py, n)?;
         let BufferViews { mut slots, rewards, terminated, truncated, d_min } = views;
         // The windows slide on by a frame, or start again from the front of the buffers.
         let wrap = self.offset + 1 + FRAME_STACK > WINDOW_FRAMES;
