@@ -6,7 +6,7 @@ Gymnasium's tuple, so that little Python runs between steps while the worker thr
 wait. Each environment's laser scans and depth images live in a window buffer of 16
 frames: an observation's ``laser`` and ``depth`` are views of 4 consecutive frames of it,
 and a step writes the one new frame and moves the view on, instead of copying all four (a
-whole stack only after a reset, and every 12 steps when the view starts again at the
+whole stack only after a reset, and every 13 steps when the view starts again at the
 front); each environment's thread writes its own rows right after its step. The final
 observations of ended episodes are views of buffers too (row ``i`` for environment ``i``,
 rewritten when its next episode ends). So the arrays ``step`` returns are views into

@@ -173,15 +173,8 @@ fn goal_tensor(goal: &[f32], b: usize, goal_dim: usize, device: &Device) -> Opti
     (goal_dim > 0).then(|| Tensor::from_data(TensorData::new(goal.to_vec(), [b, goal_dim]), device))
 }
 
-/// [`q_forward`], through `host` when given (a host network prepared once, e.g. with
-/// bfloat16 weights) instead of one read from `net`.
-pub(crate) fn q_forward_with(
-    net: &QNet,
-    host: Option<&HostNet>,
-    config: &QNetConfig,
-    device: &Device,
-    inputs: &Inputs,
-) -> Result<Vec<f32>, PolicyError> {
+/// An error unless `inputs` has the sizes a network of `config` reads.
+pub(crate) fn check_inputs(config: &QNetConfig, inputs: &Inputs) -> Result<(), PolicyError> {
     let (b, variant) = (inputs.size, config.variant);
     if variant.uses_laser() && inputs.laser.len() != b * FRAME_STACK * LASER_BEAMS {
         return Err(PolicyError::Backend(format!(
@@ -202,6 +195,20 @@ pub(crate) fn q_forward_with(
             config.goal_dim
         )));
     }
+    Ok(())
+}
+
+/// [`q_forward`], through `host` when given (a host network prepared once, e.g. with
+/// bfloat16 weights) instead of one read from `net`.
+pub(crate) fn q_forward_with(
+    net: &QNet,
+    host: Option<&HostNet>,
+    config: &QNetConfig,
+    device: &Device,
+    inputs: &Inputs,
+) -> Result<Vec<f32>, PolicyError> {
+    check_inputs(config, inputs)?;
+    let (b, variant) = (inputs.size, config.variant);
     if b == 0 {
         return Ok(Vec::new());
     }

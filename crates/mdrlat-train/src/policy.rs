@@ -4,7 +4,7 @@
 //! and the ROS node call.
 
 use crate::checkpoint::read_meta;
-use crate::learner::{Inputs, net_config, q_forward_with, read_net};
+use crate::learner::{Inputs, check_inputs, net_config, q_forward_with, read_net};
 use mdrlat_core::{
     Action, FRAME_STACK, Observation, Policy, PolicyError, Sensors, catch_panic, check_batch,
     greedy_actions, normalize_depth, normalize_goal, normalize_laser,
@@ -331,6 +331,7 @@ impl GreedyPolicy {
         }
         let inputs = &mut self.inputs[0];
         observation_inputs(batch, &self.config, inputs)?;
+        check_inputs(&self.config, inputs)?;
         let inputs = &*inputs;
         let decide = || Ok(host.decide_one(&inputs.host(), bound));
         let decision = catch_panic("the network backend", || {

@@ -214,3 +214,17 @@ fn a_single_decision_is_the_greedy_action_of_its_q_values() {
         }
     }
 }
+
+/// A single observation with frames of the wrong size is an error naming the input, not a
+/// panic of the network (the one-observation path checks sizes as the batched one does).
+#[test]
+fn a_single_observation_of_the_wrong_size_is_an_error_naming_it() {
+    let mut policy =
+        GreedyPolicy::untrained(Variant::LaserOnly, Task::Avoid, 1, &Device::flex(), 1)
+            .expect("policy");
+    let mut obs = Observation::zeros();
+    obs.laser = mdrlat_core::FrameStack::new(100);
+    let mut out = Vec::new();
+    let e = policy.act(&[&obs], &[0], &mut out).expect_err("wrong size");
+    assert!(e.to_string().contains("laser input has 400 values"), "{e}");
+}

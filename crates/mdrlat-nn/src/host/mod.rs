@@ -849,13 +849,17 @@ impl HostNet {
     /// one pass over its weights (~8 MB for MDRLAT), valid while they do not change.
     pub fn value_bound(&self) -> ValueBound {
         let [hidden, out] = &self.heads[0];
-        // Rounding to bfloat16 moves a weight by at most 2⁻⁹ of itself.
-        let bf16 = 1.0 + 2f64.powi(-8);
+        // Rounding to bfloat16 moves a weight by at most 2⁻⁸ of itself, unless it rounds a
+        // weight beyond bfloat16's range to infinity: no bound then.
+        let bf16 = |w: &[f32]| {
+            let fits = w.iter().all(|v| v.abs() < 3.38e38);
+            if fits { norm(w) * (1.0 + 2f64.powi(-8)) } else { f64::INFINITY }
+        };
         ValueBound {
-            hidden_w: norm(hidden.weight.data()) * bf16,
+            hidden_w: bf16(hidden.weight.data()),
             hidden_b: norm(hidden.bias.data()),
             hidden_k: hidden.dims().0 + 1,
-            out_w: norm(out.weight.data()) * bf16,
+            out_w: bf16(out.weight.data()),
             out_b: norm(out.bias.data()),
             out_k: out.dims().0 + 1,
         }
@@ -1291,7 +1295,8 @@ impl ValueBound {
     /// is monotone, so `A_i > A_j` gives `q_i ≥ q_j`; `q_i > q_j` for certain once `A_i −
     /// A_j` exceeds the two roundings, `2u(|V| + |A|)` for `V + A` and `2u(|V + A| +
     /// |mean|)` for the subtraction — at most `4u(Vb + 3·max|A|)`; the margin asked is twice
-    /// that. Non-finite advantages or a non-finite or huge bound give `None`, so a network
+    /// that. Non-finite advantages or a non-finite or huge bound (on `V` or on the hidden
+    /// layer, where an f32 sum could overflow) give `None`, so a network
     /// whose Q-values would not be finite still takes the path that reports them.
     pub fn decides(&self, h_norm: f64, advantage: &[f32]) -> Option<usize> {
         const U: f64 = 1.0 / 16_777_216.0;
@@ -1306,7 +1311,9 @@ impl ValueBound {
         }
         let amax = advantage.iter().fold(0.0f64, |m, &a| m.max(f64::from(a).abs()));
         let scale = vb + 3.0 * amax;
-        if !(scale.is_finite() && scale < 1e37) {
+        // The rounding bounds hold only where no f32 sum overflows: the hidden layer's
+        // too, whatever the output layer then makes of it.
+        if !(hidden < 1e37 && scale < 1e37) {
             return None;
         }
         let margin = 8.0 * U * scale + 1e-37;

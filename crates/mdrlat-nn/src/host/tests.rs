@@ -260,4 +260,9 @@ fn the_value_bound_refuses_what_rounding_could_reorder() {
     assert_eq!(bound.decides(1000.0, &nan), None);
     assert_eq!(bound.decides(f64::INFINITY, &clear), None);
     assert_eq!(bound.decides(f64::NAN, &clear), None);
+    // A hidden layer whose f32 sums could overflow decides nothing, even where a tiny
+    // output weight would make the bound on V small.
+    let tiny_out = ValueBound { out_w: 1e-40, ..bound };
+    assert_eq!(tiny_out.decides(1e3, &clear), Some(1));
+    assert_eq!(tiny_out.decides(1e38, &clear), None);
 }
