@@ -699,12 +699,6 @@ fn shapes() -> ((usize, usize), (usize, usize, usize), usize, usize) {
     ((FRAME_STACK, LASER_BEAMS), (FRAME_STACK, DEPTH_ROWS, DEPTH_COLS), 2 * ODOM_HISTORY, GOAL_DIM)
 }
 
-/// Frames in each environment's laser and depth window buffer of a `VecEnv`.
-#[pyfunction]
-fn window_frames() -> usize {
-    WINDOW_FRAMES
-}
-
 /// The `(v m/s, w rad/s)` command of each action of the paper's Table 1, by index.
 #[pyfunction]
 fn actions() -> Vec<(f32, f32)> {
@@ -729,7 +723,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Env>()?;
     m.add_class::<VecEnv>()?;
     m.add_function(wrap_pyfunction!(shapes, m)?)?;
-    m.add_function(wrap_pyfunction!(window_frames, m)?)?;
     m.add_function(wrap_pyfunction!(actions, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_worlds, m)?)?;
     m.add_function(wrap_pyfunction!(check_task, m)?)?;
