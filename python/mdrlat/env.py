@@ -11,6 +11,7 @@ are the ten of the paper's Table 1. ``terminated`` is a collision (or the goal r
 from __future__ import annotations
 
 import json
+import operator
 from typing import Any
 
 import gymnasium as gym
@@ -21,6 +22,17 @@ from . import _core
 
 #: The ten (v m/s, w rad/s) commands of the paper's Table 1, by action index.
 ACTIONS = tuple(_core.actions())
+
+
+def _action_index(action: Any) -> int | None:
+    """``action`` as an int where it is one (a Python or NumPy integer, or an integer array
+    of one element), else None: a float such as 1.5 is refused, not truncated."""
+    if isinstance(action, np.ndarray) and action.size == 1 and action.dtype.kind in "iu":
+        return int(action.reshape(()))
+    try:
+        return operator.index(action)
+    except TypeError:
+        return None
 
 
 def _settings(overrides: dict[str, Any]) -> str:
@@ -107,8 +119,8 @@ class MdrlatEnv(gym.Env):
 
     def step(self, action):
         """One control period (0.2 s) with Table 1 action ``action``."""
-        a = int(action)
-        if not self.action_space.contains(a):
+        a = _action_index(action)
+        if a is None or not self.action_space.contains(a):
             raise ValueError(f"action {action!r}: expected an integer 0 to 9")
         obs, reward, terminated, truncated, info = self._env.step(a)
         return obs, float(reward), terminated, truncated, info

@@ -21,6 +21,7 @@ i)`` would.
 
 from __future__ import annotations
 
+import operator
 from typing import Any
 
 import numpy as np
@@ -40,9 +41,10 @@ class VectorEnv(GymVectorEnv):
     def __init__(self, world: str = "train", num_envs: int = 1, threads: int = 0, **overrides: Any):
         if "task" in overrides:
             overrides["task"] = _core.check_task(str(overrides["task"]))
+        num_envs, threads = _count("num_envs", num_envs, 1), _count("threads", threads, 0)
         self.single = MdrlatEnv(world, **overrides)  # the spaces, and checks the arguments
-        self._venv = _core.VecEnv(str(world), _settings(overrides), int(num_envs), int(threads))
-        self.num_envs = int(num_envs)
+        self._venv = _core.VecEnv(str(world), _settings(overrides), num_envs, threads)
+        self.num_envs = num_envs
         self.single_observation_space = self.single.observation_space
         self.single_action_space = self.single.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -86,7 +88,12 @@ class VectorEnv(GymVectorEnv):
             # its own buffers, the infos its dict; only ended episodes come back here.
             obs, rewards, terminated, truncated, infos, ended = self._venv.step(actions)
         except TypeError:  # not an int64 array
-            a = np.ascontiguousarray(actions, dtype=np.int64)
+            a = np.asarray(actions)
+            if a.dtype.kind not in "iu":
+                raise ValueError(
+                    f"actions {actions!r}: expected {self.num_envs} integers 0 to 9"
+                ) from None
+            a = np.ascontiguousarray(a, dtype=np.int64)
             obs, rewards, terminated, truncated, infos, ended = self._venv.step(a)
         if ended:
             self._add_finals(infos, ended)
@@ -113,4 +120,23 @@ class VectorEnv(GymVectorEnv):
         infos["final_info"], infos["_final_info"] = final_info, mask.copy()
 
     def close_extras(self, **kwargs):
-        self._venv = None
+        self._venv = _Closed()
+
+
+def _count(name: str, value: Any, least: int) -> int:
+    """An integer argument of at least ``least``, or a ValueError naming it."""
+    try:
+        n = operator.index(value)
+    except TypeError:
+        raise ValueError(f"{name} {value!r}: expected an integer") from None
+    if n < least:
+        raise ValueError(f"{name} {n}: expected at least {least}")
+    return n
+
+
+class _Closed:
+    """The Rust environments of a closed :class:`VectorEnv`: gone, so any use is an error
+    that says so (not an AttributeError on None)."""
+
+    def __getattr__(self, name: str):
+        raise RuntimeError("this VectorEnv is closed: make a new one")

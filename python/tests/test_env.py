@@ -122,15 +122,19 @@ def test_bad_input_raises_python_exceptions_naming_it():
         mdrlat.make("office", task="nav")
     env = mdrlat.make("train")
     env.reset(seed=0)
-    for bad in (10, -1):
+    for bad in (10, -1, 1.5, "3", None, np.array([1, 2])):
         with pytest.raises(ValueError, match="action"):
             env.step(bad)
+    env.step(np.int8(3))  # any integer form is an action
+    env.step(np.array([4]))
     with pytest.raises(ValueError, match="pose"):
         env.reset(options={"pose": (1.0, 2.0)})
     with pytest.raises(ValueError, match="only 'pose'"):
         env.reset(options={"goal": (1.0, 2.0)})
-    with pytest.raises((ValueError, RuntimeError), match="pose"):
+    with pytest.raises(ValueError, match="start pose.*not finite"):
         env.reset(options={"pose": (float("nan"), 2.0, 0.0)})
+    with pytest.raises(ValueError, match="start pose.*outside the world's bounds"):
+        env.reset(options={"pose": (1e6, 1e6, 0.0)})
     with pytest.raises(ValueError, match="render_mode"):
         mdrlat.make("train", render_mode="human")
 
@@ -196,8 +200,20 @@ def test_the_vector_env_refuses_bad_input():
         vec.step([0, 12])
     with pytest.raises(ValueError, match="3 seeds"):
         vec.reset(seed=[1, 2, 3])
+    for bad in ([0.5, 1.0], ["a", "b"], [None, 1]):
+        with pytest.raises(ValueError, match="expected 2 integers"):
+            vec.step(bad)
     with pytest.raises(ValueError, match="num_envs 0"):
         mdrlat.VectorEnv("train", num_envs=0)
+    with pytest.raises(ValueError, match="num_envs -1"):
+        mdrlat.VectorEnv("train", num_envs=-1)
+    with pytest.raises(ValueError, match="threads -2"):
+        mdrlat.VectorEnv("train", num_envs=2, threads=-2)
+    with pytest.raises(ValueError, match="num_envs 2.0"):
+        mdrlat.VectorEnv("train", num_envs=2.0)
+    vec.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        vec.step([0, 0])
     with pytest.raises(ValueError, match="mall"):
         mdrlat.VectorEnv("mall", num_envs=2)
     nav = mdrlat.VectorEnv("nav-test", num_envs=2, task="nav")

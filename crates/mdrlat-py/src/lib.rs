@@ -26,7 +26,13 @@ fn collision_name(c: &Collision) -> &'static str {
 }
 
 fn sim_error(e: mdrlat_sim::SimError) -> PyErr {
-    PyRuntimeError::new_err(e.to_string())
+    match e {
+        // The caller's value, not the simulator's state.
+        mdrlat_sim::SimError::BadPose { .. } | mdrlat_sim::SimError::Config(_) => {
+            PyValueError::new_err(e.to_string())
+        }
+        _ => PyRuntimeError::new_err(e.to_string()),
+    }
 }
 
 /// The world `spec` names and the settings `config_json` holds, checked: a `ValueError`
@@ -153,11 +159,6 @@ impl Env {
         pose: Option<(f32, f32, f32)>,
     ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyDict>)> {
         let pose = pose.map(|(x, y, yaw)| Pose2::new(x, y, yaw.to_radians()));
-        if let Some(p) = pose
-            && !(p.x.is_finite() && p.y.is_finite() && p.yaw.is_finite())
-        {
-            return Err(PyValueError::new_err(format!("pose {p:?}: not finite")));
-        }
         self.env.reset_with(seed, pose).map_err(sim_error)?;
         self.trail.clear();
         self.trail.push(self.env.pose().position());

@@ -111,6 +111,20 @@ pub enum SimError {
         /// What is wrong.
         problem: String,
     },
+    /// A start pose given to [`Env::reset_with`] that no robot can have.
+    #[error("world '{world}': start pose ({x}, {y}, {yaw_deg} deg): {problem}")]
+    BadPose {
+        /// World name.
+        world: String,
+        /// The pose given, metres and degrees.
+        x: f32,
+        /// See `x`.
+        y: f32,
+        /// See `x`.
+        yaw_deg: f32,
+        /// What is wrong.
+        problem: String,
+    },
     /// A VecEnv worker thread stopped (it panicked).
     #[error("a VecEnv worker thread stopped unexpectedly")]
     WorkerDied,
@@ -289,12 +303,16 @@ impl Env {
     /// fixed evaluation starts and for looking at a chosen pose).
     ///
     /// # Errors
-    /// No collision-free pose could be drawn.
+    /// `pose` is not finite or lies outside the world's bounds; no collision-free pose could
+    /// be drawn.
     pub fn reset_with(
         &mut self,
         seed: Option<u64>,
         pose: Option<Pose2>,
     ) -> Result<&Observation, SimError> {
+        if let Some(p) = pose {
+            self.check_pose(p)?;
+        }
         if let Some(seed) = seed {
             self.seed_streams(seed, 0);
         }
@@ -309,6 +327,29 @@ impl Env {
     pub fn reset_stream(&mut self, seed: u64, stream: u64) -> Result<&Observation, SimError> {
         self.seed_streams(seed, stream);
         self.start_episode(None)
+    }
+
+    /// A chosen start pose is finite and inside the world's bounds (it may overlap an
+    /// obstacle: [`Env::reset_with`] does not check collisions).
+    fn check_pose(&self, p: Pose2) -> Result<(), SimError> {
+        let bounds = self.scene.world.bounds;
+        let problem = if !(p.x.is_finite() && p.y.is_finite() && p.yaw.is_finite()) {
+            "not finite".to_string()
+        } else if !bounds.contains(p.position()) {
+            format!(
+                "outside the world's bounds, x {} to {} m, y {} to {} m",
+                bounds.min.x, bounds.max.x, bounds.min.y, bounds.max.y
+            )
+        } else {
+            return Ok(());
+        };
+        Err(SimError::BadPose {
+            world: self.scene.world.name.clone(),
+            x: p.x,
+            y: p.y,
+            yaw_deg: p.yaw.to_degrees(),
+            problem,
+        })
     }
 
     fn seed_streams(&mut self, seed: u64, stream: u64) {

@@ -5,7 +5,7 @@ use mdrlat_core::{Action, FRAME_STACK};
 use mdrlat_geom::Pose2;
 use mdrlat_sim::rollout::{CSV_HEADER, TrajectoryRow};
 use mdrlat_sim::{
-    Collision, Env, EpisodeSpec, Observation, Quiet, RandomPolicy, RunOptions, SimConfig,
+    Collision, Env, EpisodeSpec, Observation, Quiet, RandomPolicy, RunOptions, SimConfig, SimError,
     StaticScene, VecEnv, VecStep, run_episodes,
 };
 use mdrlat_world::World;
@@ -441,4 +441,23 @@ fn without_auto_reset_a_finished_environment_keeps_its_final_observation() {
     venv.reset_env(0, Some(1), None).expect("reset one");
     let masked = venv.step_masked(&[Some(act(8)), None]).expect("masked").to_vec();
     assert!(masked[0].is_some() && masked[1].is_none());
+}
+
+#[test]
+fn a_start_pose_outside_the_world_or_not_finite_is_an_error_naming_it() {
+    let mut env = Env::from_world(room(""), SimConfig::default()).expect("env");
+    for (pose, problem) in [
+        (Pose2::new(1e6, 4.0, 0.0), "outside the world's bounds"),
+        (Pose2::new(4.0, -0.5, 0.0), "outside the world's bounds"),
+        (Pose2::new(f32::NAN, 4.0, 0.0), "not finite"),
+        (Pose2::new(4.0, 4.0, f32::INFINITY), "not finite"),
+    ] {
+        let e = env.reset_with(Some(1), Some(pose)).expect_err("a bad pose");
+        let text = e.to_string();
+        assert!(matches!(e, SimError::BadPose { .. }), "{text}");
+        assert!(text.contains("start pose") && text.contains(problem), "{text}");
+    }
+    // On the bounds' edge is inside (and then a collision, not a bad pose).
+    env.reset_with(Some(1), Some(Pose2::new(0.0, 4.0, 0.0))).expect("on the edge");
+    env.reset_with(Some(1), Some(Pose2::new(4.0, 4.0, 0.0))).expect("inside");
 }
