@@ -41,7 +41,8 @@ class VectorEnv(GymVectorEnv):
     def __init__(self, world: str = "train", num_envs: int = 1, threads: int = 0, **overrides: Any):
         if "task" in overrides:
             overrides["task"] = _core.check_task(str(overrides["task"]))
-        num_envs, threads = _count("num_envs", num_envs, 1), _count("threads", threads, 0)
+        num_envs = _count("num_envs", num_envs, 1, _core.MAX_ENVS)
+        threads = _count("threads", threads, 0, _core.MAX_ENVS)
         self.single = MdrlatEnv(world, **overrides)  # the spaces, and checks the arguments
         self._venv = _core.VecEnv(str(world), _settings(overrides), num_envs, threads)
         self.num_envs = num_envs
@@ -123,14 +124,16 @@ class VectorEnv(GymVectorEnv):
         self._venv = _Closed()
 
 
-def _count(name: str, value: Any, least: int) -> int:
-    """An integer argument of at least ``least``, or a ValueError naming it."""
+def _count(name: str, value: Any, least: int, most: int) -> int:
+    """An integer argument from ``least`` to ``most``, or a ValueError naming it."""
     try:
-        n = operator.index(value)
+        n = None if isinstance(value, (bool, np.bool_)) else operator.index(value)
     except TypeError:
-        raise ValueError(f"{name} {value!r}: expected an integer") from None
-    if n < least:
-        raise ValueError(f"{name} {n}: expected at least {least}")
+        n = None
+    if n is None:
+        raise ValueError(f"{name} {value!r}: expected an integer")
+    if not least <= n <= most:
+        raise ValueError(f"{name} {n}: expected {least} to {most}")
     return n
 
 
@@ -139,4 +142,6 @@ class _Closed:
     that says so (not an AttributeError on None)."""
 
     def __getattr__(self, name: str):
+        if name.startswith("__"):  # copy, pickle and friends probe for these
+            raise AttributeError(name)
         raise RuntimeError("this VectorEnv is closed: make a new one")

@@ -1,6 +1,7 @@
 """The Gymnasium environments: the ecosystem's own checker, determinism, pickling, dtypes and
 bounds, and bad input as Python exceptions."""
 
+import copy
 import pickle
 import warnings
 from pathlib import Path
@@ -211,9 +212,15 @@ def test_the_vector_env_refuses_bad_input():
         mdrlat.VectorEnv("train", num_envs=2, threads=-2)
     with pytest.raises(ValueError, match="num_envs 2.0"):
         mdrlat.VectorEnv("train", num_envs=2.0)
+    with pytest.raises(ValueError, match="num_envs 5000: expected 1 to 4096"):
+        mdrlat.VectorEnv("train", num_envs=5000)
+    with pytest.raises(ValueError, match="threads 99999999999999999999999"):
+        mdrlat.VectorEnv("train", num_envs=2, threads=99999999999999999999999)
     vec.close()
+    vec.close()  # twice is harmless
     with pytest.raises(RuntimeError, match="closed"):
         vec.step([0, 0])
+    copy.deepcopy(vec)  # copy probes dunder methods: not an error
     with pytest.raises(ValueError, match="mall"):
         mdrlat.VectorEnv("mall", num_envs=2)
     nav = mdrlat.VectorEnv("nav-test", num_envs=2, task="nav")

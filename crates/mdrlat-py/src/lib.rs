@@ -257,6 +257,9 @@ impl Env {
 /// every size from 8 to 32 frames (`docs/python-speed.md`).
 const WINDOW_FRAMES: usize = 16;
 
+/// The most environments (and threads) a vector env takes.
+const MAX_ENVS: usize = 4096;
+
 /// One observation's place in numpy buffers: `laser` and `depth` a whole stack (`frames`
 /// = 4) or an environment's window buffer (`frames` = [`WINDOW_FRAMES`]), `odom`, and
 /// `goal` (empty without the navigation task).
@@ -529,8 +532,10 @@ impl VecEnv {
         num_envs: usize,
         threads: usize,
     ) -> PyResult<Self> {
-        if num_envs == 0 || num_envs > 4096 {
-            return Err(PyValueError::new_err(format!("num_envs {num_envs}: expected 1 to 4096")));
+        if num_envs == 0 || num_envs > MAX_ENVS {
+            return Err(PyValueError::new_err(format!(
+                "num_envs {num_envs}: expected 1 to {MAX_ENVS}"
+            )));
         }
         let (loaded, config) = load(world, config_json)?;
         let nav = config.task == Task::Nav;
@@ -728,5 +733,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(builtin_worlds, m)?)?;
     m.add_function(wrap_pyfunction!(check_task, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("MAX_ENVS", MAX_ENVS)?;
     Ok(())
 }

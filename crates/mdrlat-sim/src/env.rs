@@ -112,7 +112,7 @@ pub enum SimError {
         problem: String,
     },
     /// A start pose given to [`Env::reset_with`] that no robot can have.
-    #[error("world '{world}': start pose ({x}, {y}, {yaw_deg} deg): {problem}")]
+    #[error("world '{world}': start pose ({x}, {y}, {yaw_deg:.1} deg): {problem}")]
     BadPose {
         /// World name.
         world: String,
@@ -329,16 +329,17 @@ impl Env {
         self.start_episode(None)
     }
 
-    /// A chosen start pose is finite and inside the world's bounds (it may overlap an
-    /// obstacle: [`Env::reset_with`] does not check collisions).
+    /// A chosen start pose is finite and inside the world's bounds or a spawn region
+    /// ([`World::start_area`](mdrlat_world::World::start_area)); it may overlap an obstacle:
+    /// [`Env::reset_with`] does not check collisions.
     fn check_pose(&self, p: Pose2) -> Result<(), SimError> {
-        let bounds = self.scene.world.bounds;
+        let area = self.scene.world.start_area();
         let problem = if !(p.x.is_finite() && p.y.is_finite() && p.yaw.is_finite()) {
             "not finite".to_string()
-        } else if !bounds.contains(p.position()) {
+        } else if !area.contains(p.position()) {
             format!(
                 "outside the world's bounds, x {} to {} m, y {} to {} m",
-                bounds.min.x, bounds.max.x, bounds.min.y, bounds.max.y
+                area.min.x, area.max.x, area.min.y, area.max.y
             )
         } else {
             return Ok(());

@@ -165,7 +165,8 @@ struct Running {
 /// step. The vector's auto-reset mode is restored on return.
 ///
 /// # Errors
-/// A reset that found no free pose, a policy that could not decide, or a failing observer.
+/// A fixed start pose outside the world or not finite, a reset that found no free pose, a
+/// policy that could not decide, or a failing observer.
 pub fn run_episodes(
     venv: &mut VecEnv,
     policy: &mut dyn Policy,

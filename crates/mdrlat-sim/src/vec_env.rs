@@ -532,7 +532,8 @@ impl VecEnv {
     /// same start as `Env::reset(Some(seed))`), `pose` fixes the start.
     ///
     /// # Errors
-    /// No collision-free pose could be drawn.
+    /// `pose` is not finite or lies outside the world ([`SimError::BadPose`]); no
+    /// collision-free pose could be drawn.
     ///
     /// # Panics
     /// If `i >= len()`.

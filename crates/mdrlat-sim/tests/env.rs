@@ -452,7 +452,7 @@ fn a_start_pose_outside_the_world_or_not_finite_is_an_error_naming_it() {
         (Pose2::new(f32::NAN, 4.0, 0.0), "not finite"),
         (Pose2::new(4.0, 4.0, f32::INFINITY), "not finite"),
     ] {
-        let e = env.reset_with(Some(1), Some(pose)).expect_err("a bad pose");
+        let e = env.reset_with(Some(1), Some(pose)).map(|_| ()).expect_err("a bad pose");
         let text = e.to_string();
         assert!(matches!(e, SimError::BadPose { .. }), "{text}");
         assert!(text.contains("start pose") && text.contains(problem), "{text}");
@@ -460,4 +460,14 @@ fn a_start_pose_outside_the_world_or_not_finite_is_an_error_naming_it() {
     // On the bounds' edge is inside (and then a collision, not a bad pose).
     env.reset_with(Some(1), Some(Pose2::new(0.0, 4.0, 0.0))).expect("on the edge");
     env.reset_with(Some(1), Some(Pose2::new(4.0, 4.0, 0.0))).expect("inside");
+    // A spawn region may reach past the bounds (as a map import's cells can): a pose drawn
+    // there can be given back.
+    let text = "version = 1\nname = \"wide\"\nbounds = { min = [0.0, 0.0], max = [8.0, 8.0] }\n\
+                spawn = [{ min = [7.0, 1.0], max = [9.0, 2.0] }]\n";
+    let world = World::from_toml("wide", text).expect("a spawn region past the bounds loads");
+    let mut env = Env::from_world(world, SimConfig::default()).expect("env");
+    env.reset_with(Some(1), Some(Pose2::new(8.5, 1.5, 0.0))).expect("in the spawn region");
+    let e =
+        env.reset_with(Some(1), Some(Pose2::new(9.5, 1.5, 0.0))).map(|_| ()).expect_err("outside");
+    assert!(e.to_string().contains("x 0 to 9 m, y 0 to 8 m"), "{e}");
 }

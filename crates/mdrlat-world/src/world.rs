@@ -230,6 +230,12 @@ impl World {
         Ok(world)
     }
 
+    /// Where a robot can start: the bounds and every spawn region (a world file's spawn
+    /// regions may reach past its bounds, as a map import's cells can by half a cell).
+    pub fn start_area(&self) -> Aabb {
+        self.spawn.iter().fold(self.bounds, |b, r| b.union(r))
+    }
+
     /// True if a robot disc of `radius` at `p` overlaps no static obstacle that can touch its
     /// body (height interval overlapping `[0, BODY_HEIGHT_M]`).
     pub fn is_free(&self, p: Vec2, radius: f32) -> bool {
@@ -250,7 +256,7 @@ impl World {
             .filter(|p| p.overlaps_heights(0.0, robot::BODY_HEIGHT_M))
             .collect();
         let aabbs: Vec<Aabb> = body.iter().map(|p| p.shape.aabb()).collect();
-        let area = self.spawn.iter().fold(self.bounds, |b, r| b.union(r));
+        let area = self.start_area();
         let grid = Grid::build(area, 1.0, &aabbs);
         let (mut scratch, mut near) = (GridScratch::default(), Vec::new());
         for (i, r) in self.spawn.iter().enumerate() {
