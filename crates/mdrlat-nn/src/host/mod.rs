@@ -668,11 +668,12 @@ impl HostNet {
         // Straight from each zero-padded image where the CPU has AVX-512 and there are 16
         // filters; else from its patches.
         let direct = Self::conv1_direct(&g);
-        let one = |(padded, patches): &mut (Vec<f32>, Vec<f32>),
-                   (out, image): (&mut [f32], &&[f32])| {
+        // Image `i` is convolved while image `i + 1` is fetched (see `conv16`).
+        let one = |(padded, patches): &mut (Vec<f32>, Vec<f32>), (i, out): (usize, &mut [f32])| {
+            let (image, next) = (images[i], images.get(i + 1).copied().unwrap_or_default());
             let done = filters == 16
                 && Self::pad_conv1_image(&g, &direct, image, padded)
-                && conv16(&direct, padded, wt, out);
+                && conv16(&direct, padded, wt, out, next);
             if !done {
                 g.extract(image, 1, patches);
                 gemm_short_by_long(positions, filters, k, patches, wt, out, true);
@@ -683,12 +684,12 @@ impl HostNet {
         // thread, as in `im2col`.
         if images.len() == 1 || !gemm::may_split() {
             let mut scratch = Default::default();
-            for item in out.chunks_mut(positions * filters).zip(images) {
+            for item in out.chunks_mut(positions * filters).enumerate() {
                 one(&mut scratch, item);
             }
         } else {
             out.par_chunks_mut(positions * filters)
-                .zip(images.par_iter())
+                .enumerate()
                 .for_each_init(|| (Vec::new(), Vec::new()), one);
         }
         out
@@ -753,16 +754,18 @@ impl HostNet {
         let direct = Self::conv1_direct(&g);
         // Each image's share, `[560 × 16]` (transposed) when computed directly, else
         // `[16 × 560]`.
-        let partial: Vec<(Vec<f32>, bool)> = images
-            .par_iter()
-            .zip(dy.par_chunks(positions * filters))
+        let partial: Vec<(Vec<f32>, bool)> = dy
+            .par_chunks(positions * filters)
+            .enumerate()
             .map_init(
                 || (Vec::new(), Vec::new()),
-                |(padded, patches), (image, dy)| {
+                |(padded, patches), (i, dy)| {
+                    // Image `i + 1` is fetched meanwhile (see `conv16`).
+                    let (image, next) = (images[i], images.get(i + 1).copied().unwrap_or_default());
                     let mut dwt = vec![0.0; filters * k];
                     if filters == 16
                         && Self::pad_conv1_image(&g, &direct, image, padded)
-                        && conv16_weight_grad(&direct, padded, dy, &mut dwt)
+                        && conv16_weight_grad(&direct, padded, dy, &mut dwt, next)
                     {
                         return (dwt, true);
                     }
