@@ -338,7 +338,7 @@ impl Env {
             "not finite".to_string()
         } else if !area.contains(p.position()) {
             format!(
-                "outside the world's bounds, x {} to {} m, y {} to {} m",
+                "outside the world (its bounds and spawn regions), x {} to {} m, y {} to {} m",
                 area.min.x, area.max.x, area.min.y, area.max.y
             )
         } else {
