@@ -45,6 +45,7 @@ class VectorEnv(GymVectorEnv):
         threads = _count("threads", threads, 0, _core.MAX_ENVS)
         self.single = MdrlatEnv(world, **overrides)  # the spaces, and checks the arguments
         self._venv = _core.VecEnv(str(world), _settings(overrides), num_envs, threads)
+        self._threads_asked = threads
         self.num_envs = num_envs
         self.single_observation_space = self.single.observation_space
         self.single_action_space = self.single.action_space
@@ -122,6 +123,19 @@ class VectorEnv(GymVectorEnv):
 
     def close_extras(self, **kwargs):
         self._venv = _Closed()
+
+    def __getstate__(self):
+        # As for MdrlatEnv: the Rust environments are rebuilt from the world and settings,
+        # open and not yet reset (episodes in progress are not carried over).
+        return {
+            "world": self.single._world,
+            "num_envs": self.num_envs,
+            "threads": self._threads_asked,
+            "overrides": self.single._overrides,
+        }
+
+    def __setstate__(self, state):
+        self.__init__(state["world"], state["num_envs"], state["threads"], **state["overrides"])
 
 
 def _count(name: str, value: Any, least: int, most: int) -> int:

@@ -110,6 +110,23 @@ def test_an_env_pickles_and_comes_back_the_same():
     again.close()
 
 
+def test_a_vector_env_pickles_and_comes_back_the_same():
+    vec = mdrlat.VectorEnv("office", num_envs=3, max_episode_steps=40)
+    vec.reset(seed=5)
+    again = pickle.loads(pickle.dumps(vec))  # settings carried; episodes start again
+    assert again.num_envs == 3 and again.single.max_episode_steps == 40
+    a, b = vec.reset(seed=7)[0], again.reset(seed=7)[0]
+    assert all(np.array_equal(a[k], b[k]) for k in a)
+    acts = np.array([1, 4, 7])
+    ra, rb = vec.step(acts)[1], again.step(acts)[1]
+    assert np.array_equal(ra, rb)
+    vec.close()
+    closed = pickle.loads(pickle.dumps(vec))  # a closed one comes back open
+    closed.reset(seed=0)
+    again.close()
+    closed.close()
+
+
 def test_bad_input_raises_python_exceptions_naming_it():
     with pytest.raises(ValueError, match="mall"):
         mdrlat.make("mall")
