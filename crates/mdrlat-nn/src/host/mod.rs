@@ -465,6 +465,12 @@ fn unflatten(
     out
 }
 
+/// Image `i` and the one after it (empty after the last), which the first convolution
+/// fetches while it works on image `i` (see `conv16`).
+fn with_next<'a>(images: &[&'a [f32]], i: usize) -> (&'a [f32], &'a [f32]) {
+    (images[i], images.get(i + 1).copied().unwrap_or_default())
+}
+
 /// Columns `offset..offset + n` of each row of `m` (`width` wide).
 fn columns(m: &[f32], batch: usize, width: usize, offset: usize, n: usize) -> Vec<f32> {
     (0..batch).flat_map(|b| m[b * width + offset..b * width + offset + n].iter().copied()).collect()
@@ -668,9 +674,8 @@ impl HostNet {
         // Straight from each zero-padded image where the CPU has AVX-512 and there are 16
         // filters; else from its patches.
         let direct = Self::conv1_direct(&g);
-        // Image `i` is convolved while image `i + 1` is fetched (see `conv16`).
         let one = |(padded, patches): &mut (Vec<f32>, Vec<f32>), (i, out): (usize, &mut [f32])| {
-            let (image, next) = (images[i], images.get(i + 1).copied().unwrap_or_default());
+            let (image, next) = with_next(images, i);
             let done = filters == 16
                 && Self::pad_conv1_image(&g, &direct, image, padded)
                 && conv16(&direct, padded, wt, out, next);
@@ -760,8 +765,7 @@ impl HostNet {
             .map_init(
                 || (Vec::new(), Vec::new()),
                 |(padded, patches), (i, dy)| {
-                    // Image `i + 1` is fetched meanwhile (see `conv16`).
-                    let (image, next) = (images[i], images.get(i + 1).copied().unwrap_or_default());
+                    let (image, next) = with_next(images, i);
                     let mut dwt = vec![0.0; filters * k];
                     if filters == 16
                         && Self::pad_conv1_image(&g, &direct, image, padded)
