@@ -173,10 +173,68 @@ fn backward(c: &mut Criterion) {
     g.finish();
 }
 
+/// The first depth convolution on one image (in cache, one thread), forward and weight
+/// gradient: the kernel that holds ~64 % of the streams' FLOPs.
+fn first_conv(c: &mut Criterion) {
+    let mut g = c.benchmark_group("first_conv_flops");
+    let image = values(products::FIRST_CONV_IMAGE, 4);
+    let wt = values(560 * 16, 5);
+    let dy = values(320 * 16, 6);
+    let mut out = vec![0.0f32; 320 * 16];
+    let mut dwt = vec![0.0f32; 560 * 16];
+    if !products::first_conv(&image, &wt, &mut out) {
+        eprintln!("first_conv_flops: no AVX-512 on this CPU, skipped");
+        return;
+    }
+    g.throughput(Throughput::Elements(products::FIRST_CONV_FLOP as u64));
+    g.bench_function("forward", |b| {
+        b.iter(|| black_box(products::first_conv(&image, &wt, &mut out)))
+    });
+    g.bench_function("weight_gradient", |b| {
+        b.iter(|| black_box(products::first_conv_weight_grad(&image, &dy, &mut dwt)))
+    });
+    g.finish();
+}
+
+/// The depth stream's second and third convolutions (im2col and the patch product with its
+/// ReLU) on a batch of 32, one thread and two.
+fn later_convs(c: &mut Criterion) {
+    let mut g = c.benchmark_group("later_conv_flops");
+    // [h, w, c, kh, kw, stride, out]: the paper's conv2 (16×20×16 → 8×10×32, 4×4 stride 2)
+    // and conv3 (8×10×32 → 8×10×32, 3×3).
+    let layers: [(&str, [usize; 7]); 2] =
+        [("conv2", [16, 20, 16, 4, 4, 2, 32]), ("conv3", [8, 10, 32, 3, 3, 1, 32])];
+    for (name, geo) in layers {
+        let [h, w, ch, kh, kw, stride, out] = geo;
+        let batch = 32;
+        let positions = h.div_ceil(stride) * w.div_ceil(stride);
+        let k = kh * kw * ch;
+        let x = values(batch * h * w * ch, 7);
+        let w = values(out * k, 8);
+        let wt = products::transposed(&w, out);
+        let bias = values(out, 9);
+        let mut cols = Vec::new();
+        g.throughput(Throughput::Elements((2 * batch * positions * k * out) as u64));
+        for threads in [1, 2] {
+            let pool = pool(threads);
+            g.bench_function(BenchmarkId::new(name, format!("b{batch}/{threads}t")), |b| {
+                b.iter(|| {
+                    black_box(
+                        pool.install(|| {
+                            products::conv_relu(geo, &x, batch, &w, &wt, &bias, &mut cols)
+                        }),
+                    )
+                })
+            });
+        }
+    }
+    g.finish();
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(20);
-    targets = forward, vector_matrix, backward
+    targets = forward, vector_matrix, backward, first_conv, later_convs
 }
 fn main() {
     keep_freed_memory();

@@ -71,6 +71,61 @@ pub mod products {
     ) -> Vec<f32> {
         gemm_tall(din, batch, dout, Mat::n(w), Mat::t(dy))
     }
+
+    /// The paper's first depth convolution (16 filters of 4 × 10 × 14 at stride 8) as the
+    /// learner runs it on one image: straight from the zero-padded image,
+    /// [`FIRST_CONV_IMAGE`] floats (`[4, 130, 166]`), into `out` (`[320, 16]`, added to),
+    /// with `wt` the weight transposed (`[560, 16]`). `false` where the CPU lacks AVX-512.
+    pub fn first_conv(image: &[f32], wt: &[f32], out: &mut [f32]) -> bool {
+        super::gemm::conv16(&FIRST_CONV, image, wt, out, &[])
+    }
+
+    /// Its weight gradient, added into `dwt` (`[560, 16]`) from `dy` (`[320, 16]`).
+    pub fn first_conv_weight_grad(image: &[f32], dy: &[f32], dwt: &mut [f32]) -> bool {
+        super::gemm::conv16_weight_grad(&FIRST_CONV, image, dy, dwt, &[])
+    }
+
+    /// A later convolution + ReLU as the learner runs it on `batch` channel-last images
+    /// (`[B, h, w, c]`): patches cut (`im2col`), then `P · Wᵀ + b` with `w` `[out, kh, kw,
+    /// c]` (the patches' order) and `wt` the same transposed ([`transposed`]). `geometry`
+    /// is `[h, w, c, kh, kw, stride, out]`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn conv_relu(
+        geometry: [usize; 7],
+        x: &[f32],
+        batch: usize,
+        w: &[f32],
+        wt: &[f32],
+        bias: &[f32],
+        cols: &mut Vec<f32>,
+    ) -> Vec<f32> {
+        let [h, w_, c, kh, kw, stride, out_channels] = geometry;
+        let g = super::conv::ConvGeometry { h, w: w_, c, kh, kw, stride, out_channels };
+        g.im2col(x, batch, cols);
+        super::conv::patch_product_relu(cols, w, wt, bias, batch * g.positions())
+    }
+
+    /// `w` (`[rows, len / rows]`) transposed.
+    pub fn transposed(w: &[f32], rows: usize) -> Vec<f32> {
+        super::transposed(w, rows)
+    }
+
+    /// Floats of the first convolution's zero-padded image.
+    pub const FIRST_CONV_IMAGE: usize = 4 * 130 * 166;
+    /// Its FLOPs on one image (forward, and so its weight gradient): 320 positions × 560
+    /// kernel values × 16 filters × 2.
+    pub const FIRST_CONV_FLOP: usize = 320 * 560 * 16 * 2;
+
+    const FIRST_CONV: super::gemm::Conv16 = super::gemm::Conv16 {
+        channels: 4,
+        rows: 130,
+        cols: 166,
+        kh: 10,
+        kw: 14,
+        stride: 8,
+        out_rows: 16,
+        out_cols: 20,
+    };
 }
 
 /// Width of the heads' hidden layers, and the bilinear fusion's `L_d`, `L_l`.
@@ -221,6 +276,13 @@ fn transpose_into(dxt: &[f32], din: usize, batch: usize, dx: &mut [f32], accumul
     }
 }
 
+/// `w` (`[rows, len / rows]`) transposed, as a new matrix.
+fn transposed(w: &[f32], rows: usize) -> Vec<f32> {
+    let mut wt = vec![0.0; w.len()];
+    transpose_into(w, rows, w.len() / rows.max(1), &mut wt, false);
+    wt
+}
+
 /// A convolution's weight (`[out, in, kh, kw]` or `[out, in, k]`) and bias.
 struct HostConv {
     weight: HostTensor,
@@ -228,9 +290,11 @@ struct HostConv {
     geometry: ConvGeometry,
     /// The weight in the layouts the kernels read, made at first use and kept while the
     /// network is (a `HostNet` holds its weights' storage, so they cannot change under it):
-    /// `[out, kh, kw, in]`, the patches' order (`ConvGeometry::permute_weight`), and, for the
-    /// first depth convolution, `Wᵀ` (`[in·kh·kw, out]`).
+    /// `[out, kh, kw, in]`, the patches' order (`ConvGeometry::permute_weight`), and
+    /// transposed, `[kh·kw·in, out]` (the batch's patch product reads it so); for the first
+    /// depth convolution, `Wᵀ` (`[in·kh·kw, out]`).
     patch_order: std::sync::OnceLock<Vec<f32>>,
+    patch_order_t: std::sync::OnceLock<Vec<f32>>,
     transposed: std::sync::OnceLock<Vec<f32>>,
 }
 
@@ -270,6 +334,7 @@ impl HostConv {
             bias,
             geometry,
             patch_order: std::sync::OnceLock::new(),
+            patch_order_t: std::sync::OnceLock::new(),
             transposed: std::sync::OnceLock::new(),
         })
     }
@@ -279,14 +344,15 @@ impl HostConv {
         self.patch_order.get_or_init(|| self.geometry.permute_weight(self.weight.data()))
     }
 
+    /// The weight in the patches' order, transposed: `[kh, kw, in, out]`.
+    fn patch_weight_t(&self) -> &[f32] {
+        self.patch_order_t
+            .get_or_init(|| transposed(self.patch_weight(), self.geometry.out_channels))
+    }
+
     /// `Wᵀ`, `[in·kh·kw, out]`: each patch value's weight for every filter, side by side.
     fn transposed_weight(&self) -> &[f32] {
-        self.transposed.get_or_init(|| {
-            let (w, filters) = (self.weight.data(), self.geometry.out_channels);
-            let mut wt = vec![0.0; w.len()];
-            transpose_into(w, filters, w.len() / filters.max(1), &mut wt, false);
-            wt
-        })
+        self.transposed.get_or_init(|| transposed(self.weight.data(), self.geometry.out_channels))
     }
 }
 
@@ -907,7 +973,14 @@ impl HostNet {
     ) -> Vec<f32> {
         let g = layer.geometry;
         g.im2col(x, batch, cols);
-        patch_product_relu(cols, layer.patch_weight(), layer.bias.data(), batch * g.positions())
+        let rows = batch * g.positions();
+        patch_product_relu(
+            cols,
+            layer.patch_weight(),
+            layer.patch_weight_t(),
+            layer.bias.data(),
+            rows,
+        )
     }
 
     /// The backward pass of `tape` for the loss gradients `dq` (`[R, actions]`) and, with the
