@@ -322,6 +322,34 @@ mod tests {
         }
     }
 
+    /// `relu(P · Wᵀ + b)` on both paths (a few rows through the `gemm` crate, a batch's
+    /// through the tall kernel reading the transposed weight) against sums taken one by one.
+    #[test]
+    fn patch_product_relu_matches_the_definition_on_both_paths() {
+        let (k, out) = (37, 21);
+        let w: Vec<f32> = (0..out * k).map(|v| ((v * 5) % 11) as f32 * 0.1 - 0.5).collect();
+        let mut wt = vec![0.0; w.len()];
+        crate::host::transpose_into(&w, out, k, &mut wt, false);
+        let bias: Vec<f32> = (0..out).map(|o| o as f32 * 0.05 - 0.4).collect();
+        for rows in [10, 1100] {
+            let cols: Vec<f32> = (0..rows * k).map(|v| ((v * 3) % 7) as f32 * 0.25 - 0.7).collect();
+            let got = patch_product_relu(&cols, &w, &wt, &bias, rows);
+            assert_eq!(got.len(), rows * out);
+            for r in 0..rows {
+                for o in 0..out {
+                    let sum: f32 =
+                        (0..k).map(|p| cols[r * k + p] * w[o * k + p]).sum::<f32>() + bias[o];
+                    let want = sum.max(0.0);
+                    let g = got[r * out + o];
+                    assert!(
+                        (g - want).abs() <= 1e-4 * want.abs().max(1.0),
+                        "{rows} rows, ({r}, {o}): {g} vs {want}"
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn weight_permutation_round_trips() {
         let g = ConvGeometry { h: 4, w: 4, c: 3, kh: 2, kw: 3, stride: 1, out_channels: 5 };
