@@ -177,7 +177,7 @@ fn backward(c: &mut Criterion) {
 /// gradient: the kernel that holds ~64 % of the streams' FLOPs.
 fn first_conv(c: &mut Criterion) {
     let mut g = c.benchmark_group("first_conv_flops");
-    let image = values(products::FIRST_CONV_IMAGE, 4);
+    let image = values(products::first_conv_image_len(), 4);
     let wt = values(560 * 16, 5);
     let dy = values(320 * 16, 6);
     let mut out = vec![0.0f32; 320 * 16];
@@ -186,7 +186,7 @@ fn first_conv(c: &mut Criterion) {
         eprintln!("first_conv_flops: no AVX-512 on this CPU, skipped");
         return;
     }
-    g.throughput(Throughput::Elements(products::FIRST_CONV_FLOP as u64));
+    g.throughput(Throughput::Elements(products::first_conv_flop() as u64));
     g.bench_function("forward", |b| {
         b.iter(|| black_box(products::first_conv(&image, &wt, &mut out)))
     });

@@ -180,6 +180,21 @@ impl ConvGeometry {
     }
 }
 
+/// A convolution + ReLU on `batch` channel-last images `x`: their patches cut into `cols`
+/// (kept: the backward pass reads them), then [`patch_product_relu`] with the weight in the
+/// patches' order and transposed (`(w, wt)`).
+pub(crate) fn conv_relu(
+    g: &ConvGeometry,
+    x: &[f32],
+    batch: usize,
+    (w, wt): (&[f32], &[f32]),
+    bias: &[f32],
+    cols: &mut Vec<f32>,
+) -> Vec<f32> {
+    g.im2col(x, batch, cols);
+    patch_product_relu(cols, w, wt, bias, batch * g.positions())
+}
+
 /// `y = relu(cols · wᵀ + bias)`, `[rows, out]`, for patches `cols` (`[rows, k]`) and a weight
 /// `w` (`[out, k]`), given also transposed (`wt`, `[k, out]`: what a batch's product reads,
 /// kept by the caller instead of gathered at every call — ~7 % of the second depth

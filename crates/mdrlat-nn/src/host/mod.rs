@@ -20,10 +20,7 @@ use burn::backend::{BackendTensor, DispatchTensor, DispatchTensorKind};
 use burn::module::{Param, ParamId};
 use burn::prelude::*;
 use burn::tensor::DType;
-use conv::{
-    ConvGeometry, column_sums, patch_product_backward, patch_product_relu, relu_backward,
-    relu_in_place,
-};
+use conv::{ConvGeometry, column_sums, patch_product_backward, relu_backward, relu_in_place};
 use gemm::{Conv16, Mat, conv16, conv16_weight_grad, gemm_new, gemm_short_by_long, gemm_tall};
 use rayon::prelude::*;
 
@@ -72,23 +69,44 @@ pub mod products {
         gemm_tall(din, batch, dout, Mat::n(w), Mat::t(dy))
     }
 
-    /// The paper's first depth convolution (16 filters of 4 × 10 × 14 at stride 8) as the
-    /// learner runs it on one image: straight from the zero-padded image,
-    /// [`FIRST_CONV_IMAGE`] floats (`[4, 130, 166]`), into `out` (`[320, 16]`, added to),
-    /// with `wt` the weight transposed (`[560, 16]`). `false` where the CPU lacks AVX-512.
+    /// The paper's first depth convolution (16 filters of 4 × 10 × 14 at stride 8 on
+    /// 4 × 128 × 160 stacks) as the learner runs it on one image: straight from the
+    /// zero-padded image ([`first_conv_image_len`] floats), into `out` (`[320, 16]`, added
+    /// to), with `wt` the weight transposed (`[560, 16]`). `false` where the CPU lacks
+    /// AVX-512.
     pub fn first_conv(image: &[f32], wt: &[f32], out: &mut [f32]) -> bool {
-        super::gemm::conv16(&FIRST_CONV, image, wt, out, &[])
+        super::gemm::conv16(&first_conv_geometry(), image, wt, out, &[])
     }
 
     /// Its weight gradient, added into `dwt` (`[560, 16]`) from `dy` (`[320, 16]`).
     pub fn first_conv_weight_grad(image: &[f32], dy: &[f32], dwt: &mut [f32]) -> bool {
-        super::gemm::conv16_weight_grad(&FIRST_CONV, image, dy, dwt, &[])
+        super::gemm::conv16_weight_grad(&first_conv_geometry(), image, dy, dwt, &[])
+    }
+
+    /// Floats of the first convolution's zero-padded image.
+    pub fn first_conv_image_len() -> usize {
+        let g = first_conv_geometry();
+        g.channels * g.rows * g.cols
+    }
+
+    /// Its FLOPs on one image (forward, and so its weight gradient).
+    pub fn first_conv_flop() -> usize {
+        let g = first_conv_geometry();
+        2 * g.out_rows * g.out_cols * g.channels * g.kh * g.kw * 16
+    }
+
+    /// The geometry the learner derives for the paper's stacks.
+    fn first_conv_geometry() -> super::gemm::Conv16 {
+        use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, FRAME_STACK};
+        let patches =
+            crate::patches::PatchGeometry::depth_conv1(FRAME_STACK, DEPTH_ROWS, DEPTH_COLS);
+        super::HostNet::conv1_direct(&patches)
     }
 
     /// A later convolution + ReLU as the learner runs it on `batch` channel-last images
-    /// (`[B, h, w, c]`): patches cut (`im2col`), then `P · Wᵀ + b` with `w` `[out, kh, kw,
-    /// c]` (the patches' order) and `wt` the same transposed ([`transposed`]). `geometry`
-    /// is `[h, w, c, kh, kw, stride, out]`.
+    /// (`[B, h, w, c]`), patches cut into `cols`; `w` is `[out, kh, kw, c]` (the patches'
+    /// order) and `wt` the same transposed ([`transposed`]). `geometry` is `[h, w, c, kh,
+    /// kw, stride, out]`.
     #[allow(clippy::too_many_arguments)]
     pub fn conv_relu(
         geometry: [usize; 7],
@@ -101,31 +119,13 @@ pub mod products {
     ) -> Vec<f32> {
         let [h, w_, c, kh, kw, stride, out_channels] = geometry;
         let g = super::conv::ConvGeometry { h, w: w_, c, kh, kw, stride, out_channels };
-        g.im2col(x, batch, cols);
-        super::conv::patch_product_relu(cols, w, wt, bias, batch * g.positions())
+        super::conv::conv_relu(&g, x, batch, (w, wt), bias, cols)
     }
 
     /// `w` (`[rows, len / rows]`) transposed.
     pub fn transposed(w: &[f32], rows: usize) -> Vec<f32> {
         super::transposed(w, rows)
     }
-
-    /// Floats of the first convolution's zero-padded image.
-    pub const FIRST_CONV_IMAGE: usize = 4 * 130 * 166;
-    /// Its FLOPs on one image (forward, and so its weight gradient): 320 positions × 560
-    /// kernel values × 16 filters × 2.
-    pub const FIRST_CONV_FLOP: usize = 320 * 560 * 16 * 2;
-
-    const FIRST_CONV: super::gemm::Conv16 = super::gemm::Conv16 {
-        channels: 4,
-        rows: 130,
-        cols: 166,
-        kh: 10,
-        kw: 14,
-        stride: 8,
-        out_rows: 16,
-        out_cols: 20,
-    };
 }
 
 /// Width of the heads' hidden layers, and the bilinear fusion's `L_d`, `L_l`.
@@ -971,16 +971,8 @@ impl HostNet {
         batch: usize,
         cols: &mut Vec<f32>,
     ) -> Vec<f32> {
-        let g = layer.geometry;
-        g.im2col(x, batch, cols);
-        let rows = batch * g.positions();
-        patch_product_relu(
-            cols,
-            layer.patch_weight(),
-            layer.patch_weight_t(),
-            layer.bias.data(),
-            rows,
-        )
+        let weight = (layer.patch_weight(), layer.patch_weight_t());
+        conv::conv_relu(&layer.geometry, x, batch, weight, layer.bias.data(), cols)
     }
 
     /// The backward pass of `tape` for the loss gradients `dq` (`[R, actions]`) and, with the
