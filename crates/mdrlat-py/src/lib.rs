@@ -370,7 +370,7 @@ impl ObsArrays {
 /// The numpy arrays a [`VecEnv`] writes into, made with it: the current observations
 /// (`laser` and `depth` frame windows of [`WINDOW_FRAMES`] frames each); the final
 /// observations of ended episodes (`final_*`, whole stacks); a step's `rewards`,
-/// `terminated`, `truncated` and `d_min`, `(N,)` each; and the observation dict of every
+/// `terminated` and `truncated`, `(N,)` each; and the observation dict of every
 /// window position (views of the windows). Made once instead of passed in with every step:
 /// extracting 13 numpy arguments and checking their borrows took ~1.5 µs a call, in the
 /// serial stretch between steps during which the worker threads wait.
@@ -380,7 +380,6 @@ struct VecBuffers {
     rewards: Py<PyArray1<f32>>,
     terminated: Py<PyArray1<bool>>,
     truncated: Py<PyArray1<bool>>,
-    d_min: Py<PyArray1<f32>>,
     /// `windows[k]`: the observation dict of frames `k..k + 4` of the windows.
     windows: Vec<Py<PyDict>>,
 }
@@ -391,7 +390,6 @@ struct BufferViews<'a> {
     rewards: &'a mut [f32],
     terminated: &'a mut [bool],
     truncated: &'a mut [bool],
-    d_min: &'a mut [f32],
 }
 
 /// `a`'s values as a slice of `len` values, or an error naming the buffer if it no longer
@@ -433,7 +431,6 @@ impl VecBuffers {
             rewards: PyArray1::zeros(py, n, false).unbind(),
             terminated: PyArray1::zeros(py, n, false).unbind(),
             truncated: PyArray1::zeros(py, n, false).unbind(),
-            d_min: PyArray1::zeros(py, n, false).unbind(),
             windows: Vec::new(),
         };
         let windows = (0..=WINDOW_FRAMES - FRAME_STACK)
@@ -470,7 +467,6 @@ impl VecBuffers {
                 rewards: values(py, ("", "rewards"), &self.rewards, n)?,
                 terminated: values(py, ("", "terminated"), &self.terminated, n)?,
                 truncated: values(py, ("", "truncated"), &self.truncated, n)?,
-                d_min: values(py, ("", "d_min"), &self.d_min, n)?,
             })
         }
     }
@@ -483,7 +479,6 @@ impl VecBuffers {
         d.set_item("rewards", self.rewards.bind(py))?;
         d.set_item("terminated", self.terminated.bind(py))?;
         d.set_item("truncated", self.truncated.bind(py))?;
-        d.set_item("d_min", self.d_min.bind(py))?;
         Ok(d)
     }
 }
@@ -602,10 +597,10 @@ impl VecEnv {
 
     /// One step of every environment with `actions[i]` (0–9, an int64 array of any shape
     /// holding one per environment): writes the observations (after any autoreset), the
-    /// rewards, `terminated`, `truncated` and `d_min` into the buffers. Returns Gymnasium's
+    /// rewards, `terminated` and `truncated` into the buffers. Returns Gymnasium's
     /// `(observations, rewards, terminated, truncated, infos)` — the observations the views
     /// of the windows' new position, the arrays the buffers themselves, `infos` with
-    /// `d_min` — and, for every environment whose episode ended, `(i, final_info)` (its
+    /// `d_min` (a new array) — and, for every environment whose episode ended, `(i, final_info)` (its
     /// final observation is row `i` of the `final_*` buffers).
     fn step<'py>(
         &mut self,
@@ -637,7 +632,7 @@ impl VecEnv {
             // The buffers' slices live only in this block: no Python object is made (no
             // code that might touch the arrays runs) while they do.
             let views = self.buffers.views(py, n)?;
-            let BufferViews { mut slots, rewards, terminated, truncated, d_min } = views;
+            let BufferViews { mut slots, rewards, terminated, truncated } = views;
             let write = move |slot: &mut EnvSlot<'_>,
                               _: &mdrlat_sim::VecStep,
                               last: Option<&Observation>,
@@ -652,8 +647,7 @@ impl VecEnv {
                 .detach(|| venv.step_into(acts, &mut slots, &write).map(<[_]>::to_vec))
                 .map_err(sim_error)?;
             for (i, s) in steps.iter().enumerate() {
-                (rewards[i], terminated[i], truncated[i], d_min[i]) =
-                    (s.reward, s.terminated, s.truncated, s.info.d_min);
+                (rewards[i], terminated[i], truncated[i]) = (s.reward, s.terminated, s.truncated);
             }
             steps
         };
