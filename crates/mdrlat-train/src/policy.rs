@@ -10,7 +10,6 @@ use mdrlat_core::{
     greedy_actions, normalize_depth, normalize_goal, normalize_laser,
 };
 use mdrlat_nn::burn::prelude::*;
-use mdrlat_nn::host::OneDecision;
 use mdrlat_nn::{QNet, QNetConfig, Variant};
 use mdrlat_sim::config::Task;
 use std::path::{Path, PathBuf};
@@ -30,9 +29,6 @@ pub struct GreedyPolicy {
     /// The network prepared once for the CPU's host kernels (on `flex`; `None` elsewhere),
     /// its linear layers' weights in bfloat16 with [`GreedyPolicy::with_bf16_weights`].
     host: Option<mdrlat_nn::host::HostNet>,
-    /// Its value head's norms, for single decisions without that head
-    /// (`HostNet::decide_one`).
-    value_bound: Option<mdrlat_nn::host::ValueBound>,
 }
 
 impl std::fmt::Debug for GreedyPolicy {
@@ -211,7 +207,6 @@ impl GreedyPolicy {
     ) -> Result<Self, String> {
         // A one-thread policy runs a single decision's network on the calling thread.
         let host = net.host(&config).map(|h| if threads <= 1 { h.on_calling_thread() } else { h });
-        let value_bound = host.as_ref().map(mdrlat_nn::host::HostNet::value_bound);
         Ok(Self {
             config,
             net,
@@ -221,7 +216,6 @@ impl GreedyPolicy {
             forward_batch: None,
             inputs: Vec::new(),
             host,
-            value_bound,
         })
     }
 
@@ -312,43 +306,6 @@ impl GreedyPolicy {
         if self.on_calling_thread(inputs.size) { forward() } else { self.pool.install(forward) }
     }
 
-    /// A single decision on the host kernels, which reads the value head's weights only
-    /// where the advantages leave the action in doubt (`HostNet::decide_one`: the best
-    /// advantage leads by more than eq. (11)'s rounding can move, all but near-ties), with
-    /// the same action as the Q-values' greedy one. `false` (nothing decided) off the host
-    /// kernels.
-    fn decide_one(
-        &mut self,
-        batch: &[&Observation],
-        out: &mut Vec<Action>,
-    ) -> Result<bool, PolicyError> {
-        let on_caller = self.on_calling_thread(1);
-        let (Some(host), Some(bound)) = (&self.host, &self.value_bound) else {
-            return Ok(false);
-        };
-        if self.inputs.is_empty() {
-            self.inputs.push(Inputs::default());
-        }
-        let inputs = &mut self.inputs[0];
-        observation_inputs(batch, &self.config, inputs)?;
-        check_inputs(&self.config, inputs)?;
-        let inputs = &*inputs;
-        let decide = || Ok(host.decide_one(&inputs.host(), bound));
-        let decision = catch_panic("the network backend", || {
-            if on_caller { decide() } else { self.pool.install(decide) }
-        })?;
-        match decision {
-            OneDecision::Action(best) => {
-                out.clear();
-                let action = Action::new(best)
-                    .ok_or_else(|| PolicyError::Backend(format!("action {best} out of range")))?;
-                out.push(action);
-            }
-            OneDecision::QValues(q) => greedy_actions(&q, 1, out)?,
-        }
-        Ok(true)
-    }
-
     /// Whether a forward of `rows` rows runs on the calling thread rather than in the
     /// pool: one row, one thread, on the host kernels (see `HostNet::on_calling_thread`;
     /// handing a decision to the pool's thread and waiting for it costs ~0.06 ms).
@@ -379,9 +336,6 @@ impl Policy for GreedyPolicy {
             return Ok(());
         }
         let rows = self.forward_batch.unwrap_or(batch.len());
-        if rows == 1 && batch.len() == 1 && self.decide_one(batch, out)? {
-            return Ok(());
-        }
         let chunks: Vec<&[&Observation]> = batch.chunks(rows).collect();
         if self.inputs.len() < chunks.len() {
             self.inputs.resize_with(chunks.len(), Inputs::default);
@@ -390,12 +344,22 @@ impl Policy for GreedyPolicy {
         let (net, config, device) = (&self.net, &self.config, &self.device);
         let host = self.host.as_ref();
         let inputs = &mut self.inputs[..chunks.len()];
+        // Per forward, values whose greedy actions are the Q-values': the Q-values, or for a
+        // single observation on the host kernels what `HostNet::decide_one` gives — the
+        // advantages alone wherever their lead settles the action (the value head's weights
+        // are then not read), else the Q-values.
         let one = |(chunk, inputs): (&&[&Observation], &mut Inputs)| {
             observation_inputs(chunk, config, inputs)?;
             pad_rows(inputs, rows);
-            let mut q = q_forward_with(net, host, config, device, inputs)?;
-            q.truncate(chunk.len() * Action::COUNT);
-            Ok(q)
+            let mut values = match host {
+                Some(host) if rows == 1 => {
+                    check_inputs(config, inputs)?;
+                    host.decide_one(&inputs.host()).into_values()
+                }
+                _ => q_forward_with(net, host, config, device, inputs)?,
+            };
+            values.truncate(chunk.len() * Action::COUNT);
+            Ok(values)
         };
         let forward = || -> Result<Vec<Vec<f32>>, PolicyError> {
             if on_caller {

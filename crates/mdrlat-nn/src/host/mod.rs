@@ -468,6 +468,8 @@ pub struct HostNet {
     /// Forward passes run every stage on the calling thread (see
     /// [`HostNet::on_calling_thread`]).
     sequential: bool,
+    /// The value head's norms ([`HostNet::value_bound`]), made at the first single decision.
+    value_bound: std::sync::OnceLock<ValueBound>,
 }
 
 impl std::fmt::Debug for HostNet {
@@ -579,7 +581,16 @@ impl HostNet {
         if let Some(v) = &net.velocity {
             heads.push(head(v)?);
         }
-        Some(Self { config: config.clone(), depth, laser, fusion, heads, sequential: false })
+        let value_bound = std::sync::OnceLock::new();
+        Some(Self {
+            config: config.clone(),
+            depth,
+            laser,
+            fusion,
+            heads,
+            sequential: false,
+            value_bound,
+        })
     }
 
     /// This network with forward passes that run every stage on the calling thread, none
@@ -918,9 +929,14 @@ impl HostNet {
         self.forward(x, false).q
     }
 
-    /// The value head's norms that [`HostNet::decide_one`] bounds its output by:
-    /// one pass over its weights (~8 MB for MDRLAT), valid while they do not change.
-    pub fn value_bound(&self) -> ValueBound {
+    /// The value head's norms that [`HostNet::decide_one`] bounds its output by: one pass
+    /// over its f32 weights (~8 MB for MDRLAT; kept by bfloat16 networks too) at the first
+    /// call, kept while the network is (its weights cannot change under it).
+    pub fn value_bound(&self) -> &ValueBound {
+        self.value_bound.get_or_init(|| self.compute_value_bound())
+    }
+
+    fn compute_value_bound(&self) -> ValueBound {
         let [hidden, out] = &self.heads[0];
         // Rounding to bfloat16 moves a weight by at most 2⁻⁸ of itself, unless it rounds a
         // weight beyond bfloat16's range to infinity: no bound then.
@@ -938,11 +954,11 @@ impl HostNet {
         }
     }
 
-    /// One observation's decision (`x.batch` = 1): its greedy action from the advantage
-    /// head alone where that is provably the action [`mdrlat_core::greedy_actions`] picks
-    /// from the Q-values (`bound`: this network's [`HostNet::value_bound`]), else its
-    /// Q-values, the same bits as [`HostNet::q_values`] (the value head then runs on the
-    /// representation already computed). Eq. (11) adds the same `V − mean(A)` to every
+    /// One observation's decision (`x.batch` = 1): its advantages alone where the action
+    /// [`mdrlat_core::greedy_actions`] picks from them is provably the one it picks from
+    /// the Q-values (by [`HostNet::value_bound`]), else its Q-values, the same bits as
+    /// [`HostNet::q_values`] (the value head then runs on the representation already
+    /// computed). Eq. (11) adds the same `V − mean(A)` to every
     /// advantage, so only the rounding of those two f32 operations could reorder actions;
     /// the value head, a third of a decision's weight bytes after the fusion, is skipped
     /// whenever the best advantage leads by more than that rounding can move (see
@@ -950,13 +966,18 @@ impl HostNet {
     ///
     /// # Panics
     /// If `x` holds more than one row, or an input has the wrong size.
-    pub fn decide_one(&self, x: &HostInputs<'_>, bound: &ValueBound) -> OneDecision {
+    pub fn decide_one(&self, x: &HostInputs<'_>) -> OneDecision {
+        self.decide_one_with(x, self.value_bound())
+    }
+
+    /// [`HostNet::decide_one`] with another `bound` (tests).
+    fn decide_one_with(&self, x: &HostInputs<'_>, bound: &ValueBound) -> OneDecision {
         assert_eq!(x.batch, 1, "decide_one: one observation");
         let run = || {
             let t = self.trunk(std::slice::from_ref(x));
             let advantage = self.head_forward(1, &t.h, 1).1;
-            if let Some(best) = bound.decides(norm(&t.h), &advantage) {
-                return OneDecision::Action(best);
+            if bound.decides(norm(&t.h), &advantage) {
+                return OneDecision::Advantages(advantage);
             }
             OneDecision::QValues(dueling(&self.head_forward(0, &t.h, 1).1, &advantage, 1))
         };
@@ -1328,13 +1349,23 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
     acc.iter().sum::<f32>() + tail
 }
 
-/// What [`HostNet::decide_one`] found.
+/// What [`HostNet::decide_one`] found: values (`[actions]`) whose greedy action is the
+/// Q-values'.
 #[derive(Debug, Clone, PartialEq)]
 pub enum OneDecision {
-    /// The greedy action, decided from the advantages alone.
-    Action(usize),
-    /// The Q-values (`[actions]`), for the caller's greedy rule.
+    /// The advantages, whose lead decides the action without the value head.
+    Advantages(Vec<f32>),
+    /// The Q-values.
     QValues(Vec<f32>),
+}
+
+impl OneDecision {
+    /// The values, for the caller's greedy rule ([`mdrlat_core::greedy_actions`]).
+    pub fn into_values(self) -> Vec<f32> {
+        match self {
+            Self::Advantages(v) | Self::QValues(v) => v,
+        }
+    }
 }
 
 /// The Euclidean norm of `v`, in f64.
@@ -1357,9 +1388,9 @@ pub struct ValueBound {
 }
 
 impl ValueBound {
-    /// The index of the largest of `advantage` if, for a representation of norm `h_norm`,
-    /// eq. (11) in f32 — `q_a = (V + A_a) − mean(A)` — must make it the strictly largest
-    /// Q-value, whatever `V` is within the bound; else `None`.
+    /// Whether, for a representation of norm `h_norm`, eq. (11) in f32 — `q_a = (V + A_a)
+    /// − mean(A)` — must make the largest of `advantage` the strictly largest Q-value,
+    /// whatever `V` is within the bound.
     ///
     /// The bound: `‖W h + b‖ ≤ ‖W‖_F ‖h‖ + ‖b‖`, and f32 sums of `k` products are off by at
     /// most `γ_k = k·u / (1 − k·u)` of the sum of their magnitudes (`u = 2⁻²⁴`), so the
@@ -1368,9 +1399,9 @@ impl ValueBound {
     /// A_j` exceeds the two roundings, `2u(|V| + |A|)` for `V + A` and `2u(|V + A| +
     /// |mean|)` for the subtraction — at most `4u(Vb + 3·max|A|)`; the margin asked is twice
     /// that. Non-finite advantages or a non-finite or huge bound (on `V` or on the hidden
-    /// layer, where an f32 sum could overflow) give `None`, so a network
+    /// layer, where an f32 sum could overflow) give `false`, so a network
     /// whose Q-values would not be finite still takes the path that reports them.
-    pub fn decides(&self, h_norm: f64, advantage: &[f32]) -> Option<usize> {
+    pub fn decides(&self, h_norm: f64, advantage: &[f32]) -> bool {
         const U: f64 = 1.0 / 16_777_216.0;
         let gamma = |k: usize| {
             let ku = k as f64 * U;
@@ -1379,25 +1410,19 @@ impl ValueBound {
         let hidden = (1.0 + gamma(self.hidden_k)) * (self.hidden_w * h_norm + self.hidden_b);
         let vb = 1.01 * (1.0 + gamma(self.out_k)) * (self.out_w * hidden + self.out_b);
         if !advantage.iter().all(|a| a.is_finite()) {
-            return None;
+            return false;
         }
         let amax = advantage.iter().fold(0.0f64, |m, &a| m.max(f64::from(a).abs()));
         let scale = vb + 3.0 * amax;
         // The rounding bounds hold only where no f32 sum overflows: the hidden layer's
         // too, whatever the output layer then makes of it.
         if !(hidden < 1e37 && scale < 1e37) {
-            return None;
+            return false;
         }
         let margin = 8.0 * U * scale + 1e-37;
-        let (best, top) = advantage
-            .iter()
-            .enumerate()
-            .fold((0, f32::NEG_INFINITY), |b, (i, &a)| if a > b.1 { (i, a) } else { b });
-        let clear = advantage
-            .iter()
-            .enumerate()
-            .all(|(i, &a)| i == best || f64::from(top) - f64::from(a) > margin);
-        clear.then_some(best)
+        let top = advantage.iter().fold(f32::NEG_INFINITY, |m, &a| m.max(a));
+        // The largest alone within the margin of the top: every other lies below it by more.
+        advantage.iter().filter(|&&a| f64::from(top) - f64::from(a) <= margin).count() == 1
     }
 }
 

@@ -214,16 +214,18 @@ fn the_advantage_head_alone_decides_as_the_q_values_do() {
     for (variant, goal_dim) in cases {
         let config = QNetConfig::new(variant).with_goal_dim(goal_dim);
         let host = config.init(&device).host(&config).expect("host");
-        let bound = host.value_bound();
+        let bound = *host.value_bound();
         let mut decided = 0;
         for seed in 0..8 {
             let case = Case::new(variant, goal_dim, 1, 100 + seed);
             let q = host.q_values(&case.inputs());
             let mut want = Vec::new();
             mdrlat_core::greedy_actions(&q, 1, &mut want).expect("finite");
-            match host.decide_one(&case.inputs(), &bound) {
-                OneDecision::Action(best) => {
-                    assert_eq!(best, want[0].index(), "{variant}, goal {goal_dim}, seed {seed}");
+            match host.decide_one(&case.inputs()) {
+                OneDecision::Advantages(a) => {
+                    let mut best = Vec::new();
+                    mdrlat_core::greedy_actions(&a, 1, &mut best).expect("finite");
+                    assert_eq!(best, want, "{variant}, goal {goal_dim}, seed {seed}");
                     decided += 1;
                 }
                 OneDecision::QValues(got) => assert_eq!(got, q, "{variant}, seed {seed}"),
@@ -233,7 +235,7 @@ fn the_advantage_head_alone_decides_as_the_q_values_do() {
         let never = ValueBound { hidden_w: f64::INFINITY, ..bound };
         let case = Case::new(variant, goal_dim, 1, 99);
         let want = OneDecision::QValues(host.q_values(&case.inputs()));
-        assert_eq!(host.decide_one(&case.inputs(), &never), want, "{variant}");
+        assert_eq!(host.decide_one_with(&case.inputs(), &never), want, "{variant}");
     }
 }
 
@@ -250,19 +252,21 @@ fn the_value_bound_refuses_what_rounding_could_reorder() {
     let mut picked = Vec::new();
     mdrlat_core::greedy_actions(&q, 1, &mut picked).expect("finite");
     assert_eq!(picked[0].index(), 0, "the rounding ties q_0 and q_1: {q:?}");
-    assert_eq!(bound.decides(1000.0, &close), None);
+    assert!(!bound.decides(1000.0, &close));
     // A lead beyond the rounding decides; the same lead at a larger |V| does not.
     let clear = [0.0, 2e-3, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-    assert_eq!(bound.decides(1000.0, &clear), Some(1));
-    assert_eq!(bound.decides(1e6, &clear), None);
+    assert!(bound.decides(1000.0, &clear));
+    mdrlat_core::greedy_actions(&clear, 1, &mut picked).expect("finite");
+    assert_eq!(picked[0].index(), 1, "the clear lead's action");
+    assert!(!bound.decides(1e6, &clear));
     let mut nan = clear;
     nan[4] = f32::NAN;
-    assert_eq!(bound.decides(1000.0, &nan), None);
-    assert_eq!(bound.decides(f64::INFINITY, &clear), None);
-    assert_eq!(bound.decides(f64::NAN, &clear), None);
+    assert!(!bound.decides(1000.0, &nan));
+    assert!(!bound.decides(f64::INFINITY, &clear));
+    assert!(!bound.decides(f64::NAN, &clear));
     // A hidden layer whose f32 sums could overflow decides nothing, even where a tiny
     // output weight would make the bound on V small.
     let tiny_out = ValueBound { out_w: 1e-40, ..bound };
-    assert_eq!(tiny_out.decides(1e3, &clear), Some(1));
-    assert_eq!(tiny_out.decides(1e38, &clear), None);
+    assert!(tiny_out.decides(1e3, &clear));
+    assert!(!tiny_out.decides(1e38, &clear));
 }
