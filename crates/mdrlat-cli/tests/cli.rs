@@ -372,10 +372,14 @@ fn eval_writes_reproducible_results_and_refuses_bad_input() {
         assert_eq!(l["eval"], "wander");
         let m = l["success_mean"].as_f64().expect("success_mean");
         assert!((0.0..=1.0).contains(&m) && l["success_std"].as_f64().is_some(), "{l}");
+        let moving = l["moving_success_mean"].as_f64().expect("moving_success_mean");
+        assert!(moving <= m && l["moving_success_std"].as_f64().is_some(), "{l}");
+        assert_eq!((l["min_path_m"].as_f64(), l["min_reach_m"].as_f64()), (Some(5.0), Some(2.0)));
     }
     let episodes = std::fs::read_to_string(a.join("episodes.csv")).expect("episodes.csv");
     assert!(episodes.starts_with(
-        "world,run,episode,seed,x0,y0,yaw0_deg,steps,success,collision,collision_kind,path_m,return\n"
+        "world,run,episode,seed,x0,y0,yaw0_deg,steps,moving_success,success,collision,\
+         collision_kind,path_m,reach_m,return,min_path_m,min_reach_m\n"
     ));
     assert_eq!(episodes.lines().count(), 1 + 2 * 2 * 4);
     let figures: Vec<_> = std::fs::read_dir(a.join("figures")).expect("figures").collect();
@@ -396,11 +400,14 @@ fn eval_writes_reproducible_results_and_refuses_bad_input() {
 
     let out = d.join("bad");
     let o = out.to_str().expect("utf8");
-    let cases: [(Vec<&str>, &[&str]); 7] = [
+    let cases: [(Vec<&str>, &[&str]); 10] = [
         (vec!["--policy", "wander", "--episodes", "0"], &["--episodes 0"]),
+        (vec!["--policy", "wander", "--min-path", "-1"], &["--min-path -1", "0 m or more"]),
+        (vec!["--policy", "wander", "--min-reach", "-0.5"], &["--min-reach -0.5"]),
+        (vec!["--policy", "wander", "--min-reach", "inf"], &["--min-reach inf"]),
         (vec!["--policy", "wander", "--max-steps", "-5"], &["--max-steps", "-5"]),
         (vec!["--policy", "wander", "--world", "nowhere"], &["nowhere"]),
-        (vec!["--policy", "dance"], &["dance", "wander-laser"]),
+        (vec!["--policy", "dance"], &["dance", "wander-laser", "spin", "circle"]),
         (vec!["--checkpoint", "/no/such/run"], &["/no/such/run"]),
         (vec!["--checkpoint", "x", "--policy", "wander"], &["--checkpoint", "--policy"]),
         (vec![], &["--checkpoint", "--policy"]),

@@ -12,8 +12,8 @@ use crate::EvalError;
 use mdrlat_core::{Action, Observation, Policy, PolicyError, Rng, Sensors, Velocity};
 use mdrlat_geom::Pose2;
 use mdrlat_sim::{
-    Collision, EpisodeOutcome, EpisodeSpec, Observer, RunOptions, SimConfig, StaticScene, VecEnv,
-    run_episodes,
+    Collision, EpisodeOutcome, EpisodeSpec, MovingRule, Observer, RunOptions, SimConfig,
+    StaticScene, VecEnv, run_episodes,
 };
 use mdrlat_world::World;
 use std::sync::Arc;
@@ -38,11 +38,21 @@ pub struct EvalSettings {
     pub envs: usize,
     /// Threads stepping the simulator (0: all cores).
     pub sim_threads: usize,
+    /// What a moving success needs beyond the paper's success (`--min-path`, `--min-reach`).
+    pub moving: MovingRule,
 }
 
 impl Default for EvalSettings {
     fn default() -> Self {
-        Self { episodes: 50, runs: 5, max_steps: 300, seed: 0, envs: 64, sim_threads: 1 }
+        Self {
+            episodes: 50,
+            runs: 5,
+            max_steps: 300,
+            seed: 0,
+            envs: 64,
+            sim_threads: 1,
+            moving: MovingRule::DEFAULT,
+        }
     }
 }
 
@@ -78,7 +88,7 @@ impl EvalSettings {
         if self.envs == 0 || self.envs > MAX_ENVS {
             return bad(&format!("--envs {}", self.envs), &format!("must be 1 to {MAX_ENVS}"));
         }
-        Ok(())
+        self.moving.validate().map_err(EvalError::Settings)
     }
 
     /// Episodes per world.
@@ -125,8 +135,10 @@ pub struct EpisodeRecord {
     pub steps: u32,
     /// The collision that ended it, if one did.
     pub collision: Option<Collision>,
-    /// Distance driven, metres.
+    /// Distance driven, metres (up to the collision, if one ended it).
     pub path_m: f32,
+    /// The farthest the robot got from its start, metres.
+    pub reach_m: f32,
     /// Accumulated reward (paper eq. 3).
     pub ret: f32,
     /// The actions taken (a continuous controller's: the nearest Table 1 ones).
@@ -144,6 +156,18 @@ impl EpisodeRecord {
     /// reached ([`mdrlat_sim::episode_success`]).
     pub fn success(&self) -> bool {
         mdrlat_sim::episode_success(self.goal, self.reached_goal, self.collision)
+    }
+
+    /// The success *and* the travel `rule` asks for ([`mdrlat_sim::moving_success`]).
+    pub fn moving_success(&self, rule: &MovingRule) -> bool {
+        mdrlat_sim::moving_success(
+            self.goal,
+            self.reached_goal,
+            self.collision,
+            self.path_m,
+            self.reach_m,
+            rule,
+        )
     }
 }
 
@@ -173,8 +197,10 @@ pub struct Progress<'a> {
     pub done: usize,
     /// Episodes of this world.
     pub total: usize,
-    /// Finished episodes without a collision.
+    /// Finished episodes without a collision (the paper's success).
     pub successes: usize,
+    /// Finished episodes that also travelled ([`EvalSettings::moving`]).
+    pub moving_successes: usize,
 }
 
 /// Times a policy's decisions.
@@ -236,6 +262,8 @@ struct Counter<'a> {
     total: usize,
     done: usize,
     successes: usize,
+    moving_successes: usize,
+    rule: MovingRule,
     progress: &'a mut dyn FnMut(&Progress<'_>),
 }
 
@@ -243,11 +271,13 @@ impl Observer for Counter<'_> {
     fn on_episode(&mut self, _episode: usize, outcome: &EpisodeOutcome) {
         self.done += 1;
         self.successes += usize::from(outcome.success());
+        self.moving_successes += usize::from(outcome.moving_success(&self.rule));
         (self.progress)(&Progress {
             world: self.world,
             done: self.done,
             total: self.total,
             successes: self.successes,
+            moving_successes: self.moving_successes,
         });
     }
 }
@@ -289,8 +319,15 @@ pub fn evaluate_world(
     let specs: Vec<EpisodeSpec> =
         episodes.iter().map(|&(_, _, seed)| EpisodeSpec { seed: Some(seed), pose: None }).collect();
     let mut timed = Timed { inner: policy, busy: Duration::ZERO, decisions: 0, batches: 0 };
-    let mut counter =
-        Counter { world: &world.name, total: specs.len(), done: 0, successes: 0, progress };
+    let mut counter = Counter {
+        world: &world.name,
+        total: specs.len(),
+        done: 0,
+        successes: 0,
+        moving_successes: 0,
+        rule: settings.moving,
+        progress,
+    };
     let options = RunOptions { max_steps: settings.max_steps, record_rows: false };
     let outcomes = run_episodes(&mut venv, &mut timed, &specs, &options, &mut counter).map_err(
         |e| match e {
@@ -313,6 +350,7 @@ pub fn evaluate_world(
             steps: o.steps,
             collision: o.collision,
             path_m: o.path_m,
+            reach_m: o.reach_m,
             ret: o.reward,
             actions: o.actions,
             commands: o.commands,

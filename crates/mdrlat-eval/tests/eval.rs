@@ -6,7 +6,7 @@ use mdrlat_eval::{
     EvalSettings, Pick, WorldEval, WorldSummary, draw_episode, episode_seed, episodes_csv,
     eval_sim_config, evaluate_world, pick_episodes, summary_csv,
 };
-use mdrlat_sim::{Scripted, SimConfig};
+use mdrlat_sim::{MovingRule, Scripted, SimConfig};
 use mdrlat_world::World;
 
 fn world(name: &str) -> World {
@@ -14,7 +14,7 @@ fn world(name: &str) -> World {
 }
 
 fn small(seed: u64, envs: usize) -> EvalSettings {
-    EvalSettings { episodes: 6, runs: 2, max_steps: 60, seed, envs, sim_threads: 1 }
+    EvalSettings { episodes: 6, runs: 2, max_steps: 60, seed, envs, ..EvalSettings::default() }
 }
 
 fn eval(world: &World, policy: Scripted, settings: &EvalSettings) -> WorldEval {
@@ -28,7 +28,7 @@ fn same_seed_same_bytes_other_seed_other_starts() {
     let w = world("crowd");
     let a = eval(&w, Scripted::Wander, &small(3, 4));
     let b = eval(&w, Scripted::Wander, &small(3, 4));
-    assert_eq!(episodes_csv([&a]), episodes_csv([&b]));
+    assert_eq!(episodes_csv([&a], &MovingRule::DEFAULT), episodes_csv([&b], &MovingRule::DEFAULT));
     let s = |e: &WorldEval| summary_csv(&[WorldSummary::new("wander", e, &small(3, 4))]);
     assert_eq!(s(&a), s(&b));
     let c = eval(&w, Scripted::Wander, &small(4, 4));
@@ -59,8 +59,9 @@ fn outcomes_do_not_depend_on_how_many_environments_step_together() {
         let one = eval(&w, p, &small(9, 1));
         let five = eval(&w, p, &small(9, 5));
         let all = eval(&w, p, &EvalSettings { sim_threads: 2, ..small(9, 64) });
-        assert_eq!(episodes_csv([&one]), episodes_csv([&five]), "{p:?}");
-        assert_eq!(episodes_csv([&one]), episodes_csv([&all]), "{p:?}");
+        let csv = |e: &WorldEval| episodes_csv([e], &MovingRule::DEFAULT);
+        assert_eq!(csv(&one), csv(&five), "{p:?}");
+        assert_eq!(csv(&one), csv(&all), "{p:?}");
         assert_eq!(one.records, five.records);
     }
 }
@@ -90,6 +91,48 @@ fn success_is_surviving_the_step_budget_and_the_summary_is_over_runs() {
     assert_eq!(json["runs"], 2);
 }
 
+/// Issue 38: the paper's success can be gamed by a policy that never drives anywhere; the
+/// moving success cannot. On the paper's three test worlds `spin` (turning in place) and
+/// `circle` (the tightest forward circle) survive most episodes but never count as a moving
+/// success, while `wander` (which drives) does.
+#[test]
+fn spinning_and_circling_score_by_the_papers_measure_and_zero_by_the_moving_one() {
+    let settings = EvalSettings { episodes: 8, runs: 1, max_steps: 300, ..small(11, 8) };
+    for name in ["office", "furnished", "crowd"] {
+        let w = world(name);
+        for p in [Scripted::Spin, Scripted::Circle] {
+            let e = eval(&w, p, &settings);
+            let s = WorldSummary::new(p.name(), &e, &settings);
+            assert_eq!(s.moving_success_mean, 0.0, "{name} {p:?}: {s:?}");
+            // Turning in place never collides (walkers yield to the robot); circling does
+            // where a start lies within its 0.76 m circle of a wall, but not always.
+            let floor = if p == Scripted::Spin { 1.0 } else { 0.1 };
+            assert!(s.success_mean >= floor, "{name} {p:?}: {s:?}");
+            let json: serde_json::Value = serde_json::from_str(&s.json(None)).expect("json");
+            assert_eq!(json["moving_success_mean"], 0.0);
+            assert_eq!(
+                (json["min_path_m"].as_f64(), json["min_reach_m"].as_f64()),
+                (Some(5.0), Some(2.0))
+            );
+            if p == Scripted::Circle {
+                // It drives far enough: the reach rule is what rejects it.
+                assert!(
+                    e.records.iter().all(|r| !r.success() || r.path_m > 5.0 && r.reach_m < 2.0)
+                );
+            } else {
+                assert!(e.records.iter().all(|r| r.path_m < 0.05), "spin drove");
+            }
+        }
+        let e = eval(&w, Scripted::Wander, &settings);
+        let s = WorldSummary::new("wander", &e, &settings);
+        assert!(s.moving_success_mean > 0.0, "{name}: wander never counted as moving: {s:?}");
+        for r in &e.records {
+            let moved = r.path_m >= 5.0 && r.reach_m >= 2.0;
+            assert_eq!(r.moving_success(&settings.moving), r.success() && moved, "{r:?}");
+        }
+    }
+}
+
 #[test]
 fn bad_settings_name_the_flag() {
     let w = world("office");
@@ -100,6 +143,20 @@ fn bad_settings_name_the_flag() {
         (EvalSettings { runs: 0, ..small(0, 1) }, "--runs 0"),
         (EvalSettings { max_steps: 0, ..small(0, 1) }, "--max-steps 0"),
         (EvalSettings { envs: 0, ..small(0, 1) }, "--envs 0"),
+        (
+            EvalSettings {
+                moving: MovingRule { min_path_m: -1.0, min_reach_m: 2.0 },
+                ..small(0, 1)
+            },
+            "--min-path -1",
+        ),
+        (
+            EvalSettings {
+                moving: MovingRule { min_path_m: 5.0, min_reach_m: f32::NAN },
+                ..small(0, 1)
+            },
+            "--min-reach NaN",
+        ),
     ] {
         let e = evaluate_world(&w, &sim, p.as_mut(), &settings, &mut |_| {}).expect_err("bad");
         assert!(e.to_string().contains(flag), "{e}");

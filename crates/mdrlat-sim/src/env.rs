@@ -385,7 +385,8 @@ impl Env {
 
     /// Where each pedestrian will be at every physics sub-step of the next
     /// `spawn_pedestrian_horizon_s` seconds (now included): `(centre, radius)`. Pedestrians
-    /// do not react to the robot, so their paths are known before a pose is drawn.
+    /// who ignore the robot walk these paths, and yielding walkers never come closer to it,
+    /// so the sweep is known before a pose is drawn.
     fn pedestrian_sweep(&self) -> Vec<(Vec2, f32)> {
         let specs = &self.scene.world.pedestrians;
         // The physics sub-step, or coarser for settings that would sample more than
@@ -401,7 +402,7 @@ impl Env {
         let mut sweep = Vec::with_capacity((n + 1) * states.len());
         for k in 0..=n {
             if k > 0 {
-                pedestrians::advance(specs, &mut states, sub_dt);
+                pedestrians::advance(specs, &mut states, None, sub_dt);
             }
             sweep.extend(states.iter().zip(specs).map(|(st, spec)| (st.position, spec.radius)));
         }
@@ -543,7 +544,16 @@ impl Env {
         let sub_dt = self.config.dt_s / self.config.substeps as f32;
         let mut collision = None;
         for _ in 0..self.config.substeps {
-            pedestrians::advance(&self.scene.world.pedestrians, &mut self.pedestrians, sub_dt);
+            let keepout = (self.config.pedestrian_yield_m >= 0.0).then(|| pedestrians::Keepout {
+                center: self.robot.pose.position(),
+                radius: self.config.robot.radius_m + self.config.pedestrian_yield_m,
+            });
+            pedestrians::advance(
+                &self.scene.world.pedestrians,
+                &mut self.pedestrians,
+                keepout,
+                sub_dt,
+            );
             self.robot.advance(command, &self.config.robot, sub_dt);
             collision = self.contact();
             if collision.is_some() {

@@ -45,8 +45,11 @@ pub struct EpisodeOutcome {
     pub reached_goal: bool,
     /// The environment's time limit ended it (`max_episode_steps`).
     pub truncated: bool,
-    /// Distance driven, metres (sum of the straight distances between step poses).
+    /// Distance driven, metres (sum of the straight distances between step poses): the
+    /// collision-free path, since an episode ends at its collision.
     pub path_m: f32,
+    /// The farthest the robot got from its start at any step, metres.
+    pub reach_m: f32,
     /// Every action taken, in order (a continuous controller's: the nearest Table 1 ones).
     pub actions: Vec<Action>,
     /// Every velocity command, in order: with the episode's seed they reproduce it exactly
@@ -69,10 +72,74 @@ pub fn episode_success(
     }
 }
 
+/// What an episode must show to count as a *moving* success, beyond the paper's rule: a
+/// policy that turns in place or circles on the spot never collides, so the paper's success
+/// ("no collision within 300 steps") counts it; the moving success does not.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MovingRule {
+    /// Metres driven at least (`--min-path`).
+    pub min_path_m: f32,
+    /// Metres from the start at least, at some step (`--min-reach`).
+    pub min_reach_m: f32,
+}
+
+impl MovingRule {
+    /// The defaults: 5 m driven, 2 m from the start (a 300-step episode at the slow 0.2 m/s
+    /// drives 12 m; turning in place drives 0 m, the tightest forward circle of Table 1
+    /// reaches 0.76 m).
+    pub const DEFAULT: MovingRule = MovingRule { min_path_m: 5.0, min_reach_m: 2.0 };
+
+    /// Checks both thresholds (finite and not negative), naming the flag.
+    ///
+    /// # Errors
+    /// The first bad threshold, as `--min-path -1: ...`.
+    pub fn validate(&self) -> Result<(), String> {
+        for (flag, v) in [("--min-path", self.min_path_m), ("--min-reach", self.min_reach_m)] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(format!("{flag} {v}: must be a finite distance of 0 m or more"));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for MovingRule {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// The moving success rule: [`episode_success`] *and*, in obstacle avoidance, at least
+/// `rule.min_path_m` driven and at least `rule.min_reach_m` from the start at some step. In
+/// navigation reaching the goal is already travel: the moving success is the success.
+pub fn moving_success(
+    goal: Option<Vec2>,
+    reached_goal: bool,
+    collision: Option<Collision>,
+    path_m: f32,
+    reach_m: f32,
+    rule: &MovingRule,
+) -> bool {
+    episode_success(goal, reached_goal, collision)
+        && (goal.is_some() || (path_m >= rule.min_path_m && reach_m >= rule.min_reach_m))
+}
+
 impl EpisodeOutcome {
     /// See [`episode_success`].
     pub fn success(&self) -> bool {
         episode_success(self.goal, self.reached_goal, self.collision)
+    }
+
+    /// See [`moving_success`].
+    pub fn moving_success(&self, rule: &MovingRule) -> bool {
+        moving_success(
+            self.goal,
+            self.reached_goal,
+            self.collision,
+            self.path_m,
+            self.reach_m,
+            rule,
+        )
     }
 }
 
@@ -253,6 +320,7 @@ fn run(
             r.last = s.info.pose;
             let o = &mut r.outcome;
             o.path_m = r.path_m as f32;
+            o.reach_m = o.reach_m.max((s.info.pose.position() - o.start.position()).length());
             let row = TrajectoryRow {
                 action,
                 reward: s.reward,
@@ -306,6 +374,7 @@ fn start_one(
         reached_goal: false,
         truncated: false,
         path_m: 0.0,
+        reach_m: 0.0,
         actions: Vec::new(),
         commands: Vec::new(),
         rows: Vec::new(),

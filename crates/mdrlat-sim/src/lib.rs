@@ -23,8 +23,8 @@ pub mod vec_env;
 pub use config::SimConfig;
 pub use env::{Collision, Env, EnvState, Observation, SimError, Step, StepInfo};
 pub use episodes::{
-    EpisodeOutcome, EpisodeSpec, Observer, Quiet, RunError, RunOptions, episode_success,
-    run_episodes,
+    EpisodeOutcome, EpisodeSpec, MovingRule, Observer, Quiet, RunError, RunOptions,
+    episode_success, moving_success, run_episodes,
 };
 pub use mdrlat_core::{Policy, PolicyError, Sensors};
 pub use policy::{ConstantPolicy, RandomPolicy, ReplayPolicy, Scripted, WanderPolicy};

@@ -2,8 +2,12 @@
 //!
 //! Each walks towards its next waypoint at its speed; at the last waypoint it turns back
 //! (or, with `loop`, goes on to the first). If another pedestrian blocks its way it waits,
-//! and after `wait_s` turns back. Pedestrians do not avoid the robot: walking into it is a
-//! collision (SPEC §2). Pedestrians are updated in index order, so results are deterministic.
+//! and after `wait_s` turns back. The robot blocks a walker the same way when the simulator
+//! says walkers yield to it (`pedestrian_yield_m`, the default): as a person would, a walker
+//! does not walk into a robot that stands in its way nor run it down from behind, so a
+//! pedestrian collision is one the robot drove into. With yielding off (the simulator before
+//! 2026-12-06) walkers ignore the robot and walking into it is a collision all the same
+//! (SPEC §2). Pedestrians are updated in index order, so results are deterministic.
 
 use mdrlat_core::Rng;
 use mdrlat_geom::{Cylinder, Prism, Shape, Vec2};
@@ -65,8 +69,24 @@ fn turn_back(spec: &PedestrianSpec, st: &mut PedestrianState) {
     };
 }
 
-/// Moves every pedestrian by `dt` seconds.
-pub fn advance(specs: &[PedestrianSpec], states: &mut [PedestrianState], dt: f32) {
+/// A disc walkers keep out of: they do not step closer to its centre than its radius plus
+/// their own (the robot's footprint plus the personal space walkers keep from it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Keepout {
+    /// Centre, world frame.
+    pub center: Vec2,
+    /// Radius, metres.
+    pub radius: f32,
+}
+
+/// Moves every pedestrian by `dt` seconds; a walker whose next step would come closer to
+/// another walker, or into `keepout` (the robot, when walkers yield to it), waits instead.
+pub fn advance(
+    specs: &[PedestrianSpec],
+    states: &mut [PedestrianState],
+    keepout: Option<Keepout>,
+    dt: f32,
+) {
     for i in 0..states.len() {
         let spec = &specs[i];
         let mut st = states[i];
@@ -78,14 +98,16 @@ pub fn advance(specs: &[PedestrianSpec], states: &mut [PedestrianState], dt: f32
             let dist = to.length();
             let step = budget.min(dist);
             let next = if dist > 0.0 { st.position + to * (step / dist) } else { st.position };
-            let blocked = states.iter().enumerate().any(|(k, o)| {
-                k != i && {
-                    let gap = spec.radius + specs[k].radius;
-                    let (d_next, d_now) =
-                        ((next - o.position).length(), (st.position - o.position).length());
-                    d_next < gap && d_next < d_now
-                }
-            });
+            // Blocked by a disc: the step ends inside it and closer than before.
+            let blocks = |center: Vec2, radius: f32| {
+                let d_next = (next - center).length();
+                d_next < spec.radius + radius && d_next < (st.position - center).length()
+            };
+            let blocked = states
+                .iter()
+                .enumerate()
+                .any(|(k, o)| k != i && blocks(o.position, specs[k].radius))
+                || keepout.is_some_and(|k| blocks(k.center, k.radius));
             if blocked {
                 st.waited_s += dt;
                 if st.waited_s >= spec.wait_s {
@@ -142,11 +164,11 @@ mod tests {
         let specs = [walker(false)];
         let mut st =
             [PedestrianState { position: Vec2::ZERO, target: 1, direction: 1, waited_s: 0.0 }];
-        advance(&specs, &mut st, 0.5);
+        advance(&specs, &mut st, None, 0.5);
         assert!((st[0].position - Vec2::new(0.5, 0.0)).length() < 1e-6);
-        advance(&specs, &mut st, 2.0); // 2 m: corner at (2,0), then 0.5 m up
+        advance(&specs, &mut st, None, 2.0); // 2 m: corner at (2,0), then 0.5 m up
         assert!((st[0].position - Vec2::new(2.0, 0.5)).length() < 1e-5, "{:?}", st[0]);
-        advance(&specs, &mut st, 2.0); // 1.5 m to the end, 0.5 m back
+        advance(&specs, &mut st, None, 2.0); // 1.5 m to the end, 0.5 m back
         assert!((st[0].position - Vec2::new(2.0, 1.5)).length() < 1e-5, "{:?}", st[0]);
         assert_eq!(st[0].direction, -1);
     }
@@ -161,7 +183,7 @@ mod tests {
             waited_s: 0.0,
         }];
         let diag = 8f32.sqrt();
-        advance(&specs, &mut st, diag + 0.5);
+        advance(&specs, &mut st, None, diag + 0.5);
         assert!((st[0].position - Vec2::new(0.5, 0.0)).length() < 1e-4, "{:?}", st[0]);
     }
 
@@ -183,10 +205,10 @@ mod tests {
                 waited_s: 0.0,
             },
         ];
-        advance(&specs, &mut st, 0.2);
+        advance(&specs, &mut st, None, 0.2);
         assert_eq!(st[0].position, Vec2::new(0.5, 0.0), "blocked: waits");
         for _ in 0..5 {
-            advance(&specs, &mut st, 0.2);
+            advance(&specs, &mut st, None, 0.2);
         }
         assert_eq!(st[0].direction, -1, "turned back after waiting");
     }
@@ -224,15 +246,52 @@ mod tests {
             },
         ];
         for _ in 0..3 {
-            advance(&specs, &mut st, 0.1); // blocked: waits, then turns back
+            advance(&specs, &mut st, None, 0.1); // blocked: waits, then turns back
         }
         assert_eq!((st[0].direction, st[0].target), (-1, 0));
         // Walking backwards it passes waypoint 0 and goes on to waypoint 3, not back to 1.
         for _ in 0..15 {
-            advance(&specs, &mut st, 0.1);
+            advance(&specs, &mut st, None, 0.1);
         }
         assert_eq!(st[0].target, 3, "{:?}", st[0]);
         assert!(st[0].position.x.abs() < 1e-4 && st[0].position.y > 0.4, "{:?}", st[0]);
+    }
+
+    #[test]
+    fn walkers_yield_to_the_robot_in_their_way_and_behind_it() {
+        let specs = [walker(false)];
+        let start =
+            PedestrianState { position: Vec2::ZERO, target: 1, direction: 1, waited_s: 0.0 };
+        // A robot standing on the walker's path at x = 1.2: the walker stops short of it, waits
+        // `wait_s`, then turns back, and never comes within the keep-out disc.
+        let robot = Keepout { center: Vec2::new(1.2, 0.0), radius: 0.177 + 0.3 };
+        let mut st = [start];
+        let mut closest = f32::INFINITY;
+        for k in 1..=40 {
+            advance(&specs, &mut st, Some(robot), 0.1);
+            closest = closest.min((st[0].position - robot.center).length());
+            if k == 4 {
+                assert!((st[0].position.x - 0.4).abs() < 1e-5, "{:?}", st[0]);
+            }
+            if (5..14).contains(&k) {
+                assert_eq!(st[0].position.x, 0.4, "waits at step {k}");
+            }
+            if k == 16 {
+                assert_eq!(st[0].direction, -1, "turned back after waiting");
+            }
+        }
+        assert!(closest >= 0.25 + robot.radius - 1e-5, "came within {closest}");
+        // Without yielding the same walker walks through the robot's place.
+        let mut st = [start];
+        for _ in 0..15 {
+            advance(&specs, &mut st, None, 0.1);
+        }
+        assert!(st[0].position.x > 1.4, "{:?}", st[0]);
+        // A robot ahead and moving away is not in the way of a walker that stays clear.
+        let far = Keepout { center: Vec2::new(1.9, 0.0), radius: 0.477 };
+        let mut st = [start];
+        advance(&specs, &mut st, Some(far), 0.5);
+        assert!((st[0].position.x - 0.5).abs() < 1e-6, "{:?}", st[0]);
     }
 
     #[test]

@@ -17,12 +17,27 @@ pub enum Scripted {
     Wander,
     /// The same wanderer with the laser only: blind to low boxes and overhangs.
     WanderLaser,
+    /// A sanity check: turns in place for ever (the first Table 1 action with no forward
+    /// speed). It never collides in a static world, so the paper's success counts it; it
+    /// never drives, so the moving success does not.
+    Spin,
+    /// A sanity check: the tightest forward circle of Table 1 (the action with the smallest
+    /// turning radius v/|ω|: 0.2 m/s at π/6 rad/s, a circle 0.76 m across). It drives 12 m in
+    /// 300 steps but never gets 2 m from its start: the moving success's reach rule is
+    /// what rejects it.
+    Circle,
 }
 
 impl Scripted {
     /// Every scripted policy, in the order of [`Scripted::name`]s listed in errors.
-    pub const ALL: [Scripted; 4] =
-        [Scripted::Random, Scripted::Forward, Scripted::Wander, Scripted::WanderLaser];
+    pub const ALL: [Scripted; 6] = [
+        Scripted::Random,
+        Scripted::Forward,
+        Scripted::Wander,
+        Scripted::WanderLaser,
+        Scripted::Spin,
+        Scripted::Circle,
+    ];
 
     /// The name used on the command line and in reports.
     pub fn name(self) -> &'static str {
@@ -31,6 +46,25 @@ impl Scripted {
             Scripted::Forward => "forward",
             Scripted::Wander => "wander",
             Scripted::WanderLaser => "wander-laser",
+            Scripted::Spin => "spin",
+            Scripted::Circle => "circle",
+        }
+    }
+
+    /// The action of a policy that always takes the same one (`forward`, `spin`, `circle`),
+    /// found in Table 1 by what it does, not by its index.
+    pub fn constant_action(self) -> Option<Action> {
+        // The action minimising `key` among those `keep` accepts.
+        let best = |keep: fn(&Velocity) -> bool, key: fn(&Velocity) -> f32| {
+            Action::all()
+                .filter(|a| keep(&a.command()))
+                .min_by(|a, b| key(&a.command()).total_cmp(&key(&b.command())))
+        };
+        match self {
+            Scripted::Forward => best(|c| c.w == 0.0, |c| -c.v),
+            Scripted::Spin => best(|c| c.v == 0.0 && c.w != 0.0, |c| -c.w.abs()),
+            Scripted::Circle => best(|c| c.v > 0.0 && c.w != 0.0, |c| c.v / c.w.abs()),
+            Scripted::Random | Scripted::Wander | Scripted::WanderLaser => None,
         }
     }
 
@@ -38,10 +72,13 @@ impl Scripted {
     /// policy's stream until an episode gives it its own seed.
     pub fn build(self, config: &SimConfig, seed: u64) -> Box<dyn Policy> {
         let laser = Laser::new(&config.laser);
+        if let Some(action) = self.constant_action() {
+            return Box::new(ConstantPolicy::named(action, self.name()));
+        }
         match self {
             Scripted::Random => Box::new(RandomPolicy::new(seed)),
-            Scripted::Forward => {
-                Box::new(ConstantPolicy(Action::new(1).unwrap_or_else(|| unreachable!())))
+            Scripted::Forward | Scripted::Spin | Scripted::Circle => {
+                unreachable!("constant actions are built above")
             }
             Scripted::Wander => Box::new(WanderPolicy::with_depth(
                 laser.angles(),
@@ -127,11 +164,27 @@ impl Policy for RandomPolicy {
 
 /// Always the same action.
 #[derive(Debug, Clone, Copy)]
-pub struct ConstantPolicy(pub Action);
+pub struct ConstantPolicy {
+    /// The action.
+    pub action: Action,
+    name: Option<&'static str>,
+}
+
+impl ConstantPolicy {
+    /// Always `action`, named `constant action N`.
+    pub fn new(action: Action) -> Self {
+        Self { action, name: None }
+    }
+
+    /// Always `action`, under a name of its own (`spin`, `circle`).
+    pub fn named(action: Action, name: &'static str) -> Self {
+        Self { action, name: Some(name) }
+    }
+}
 
 impl Policy for ConstantPolicy {
     fn name(&self) -> String {
-        format!("constant action {}", self.0)
+        self.name.map_or_else(|| format!("constant action {}", self.action), str::to_string)
     }
     fn sensors(&self) -> Sensors {
         Sensors::NONE
@@ -144,7 +197,7 @@ impl Policy for ConstantPolicy {
     ) -> Result<(), PolicyError> {
         check_batch(batch, slots)?;
         out.clear();
-        out.resize(batch.len(), self.0);
+        out.resize(batch.len(), self.action);
         Ok(())
     }
 }

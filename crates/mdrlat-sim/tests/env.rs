@@ -105,23 +105,38 @@ fn a_low_box_hits_the_bumper_unseen_by_the_laser() {
     assert_eq!(hit, Some(Collision::Bumper { obstacle: 4 }));
 }
 
-#[test]
-fn a_pedestrian_walking_into_the_robot_is_a_collision() {
+/// The first collision of 30 steps of `action` from (4, 4) facing `yaw`, beside a walker
+/// pacing y = 4 between x = 2 and 6.
+fn walker_episode(config: SimConfig, yaw: f32, action: usize) -> Option<Collision> {
     let ped = r#"pedestrian = [ { waypoints = [[2.0, 4.0], [6.0, 4.0]], speed = 1.0 } ]"#;
-    let mut env = Env::from_world(room(ped), SimConfig::default()).expect("env");
-    env.reset_with(Some(3), Some(Pose2::new(4.0, 4.0, std::f32::consts::FRAC_PI_2)))
-        .expect("reset");
-    let mut hit = None;
+    let mut env = Env::from_world(room(ped), config).expect("env");
+    env.reset_with(Some(3), Some(Pose2::new(4.0, 4.0, yaw))).expect("reset");
     for _ in 0..30 {
-        let s = env.step(act(8)).expect("step"); // turning in place
+        let s = env.step(act(action)).expect("step");
         if s.terminated {
-            hit = s.info.collision;
-            break;
+            return s.info.collision;
         }
     }
+    None
+}
+
+#[test]
+fn a_pedestrian_walking_into_the_robot_is_a_collision_unless_walkers_yield() {
+    let ignoring = SimConfig { pedestrian_yield_m: -1.0, ..SimConfig::default() };
+    // Turning in place on the walker's path: a walker that ignores the robot runs into it.
+    let hit = walker_episode(ignoring, std::f32::consts::FRAC_PI_2, 8);
     assert!(
         matches!(hit, Some(Collision::Pedestrian { index: 0 }) | Some(Collision::LaserRange)),
         "{hit:?}"
+    );
+    // Walkers yield by default: one that would walk into the standing robot waits and turns
+    // back, as a person would.
+    assert_eq!(walker_episode(SimConfig::default(), std::f32::consts::FRAC_PI_2, 8), None);
+    // A robot that drives into a walker still collides: yielding is not a force field.
+    let drive = walker_episode(SimConfig::default(), 0.0, 1);
+    assert!(
+        matches!(drive, Some(Collision::Pedestrian { index: 0 }) | Some(Collision::LaserRange)),
+        "{drive:?}"
     );
 }
 
@@ -145,7 +160,15 @@ fn odometry_history_is_the_last_three_true_velocities() {
 
 /// A random-policy episode seeded `seed` through the episode runner, and the final frames.
 fn random_episode(world: &World, seed: u64, steps: u32) -> (Vec<TrajectoryRow>, Vec<u8>) {
-    let config = SimConfig::default();
+    random_episode_with(world, seed, steps, SimConfig::default())
+}
+
+fn random_episode_with(
+    world: &World,
+    seed: u64,
+    steps: u32,
+    config: SimConfig,
+) -> (Vec<TrajectoryRow>, Vec<u8>) {
     let scene = Arc::new(StaticScene::new(Arc::new(world.clone()), &config));
     let mut venv = VecEnv::new(scene, config, 1, 1).expect("venv");
     let mut policy = RandomPolicy::new(seed);
@@ -178,17 +201,24 @@ fn same_seed_same_bytes_and_different_seed_differs() {
 #[test]
 fn golden_rollout_hash() {
     let world = mdrlat_world::builtin::get("example").expect("builtin").expect("valid");
-    let (rows, frames) = random_episode(&world, 42, 200);
-    let mut csv = String::from(CSV_HEADER);
-    csv.push('\n');
-    for r in &rows {
-        csv.push_str(&r.to_csv());
+    let hash = |config: SimConfig| {
+        let (rows, frames) = random_episode_with(&world, 42, 200, config);
+        let mut csv = String::from(CSV_HEADER);
         csv.push('\n');
-    }
-    let h = (fnv1a(csv.as_bytes()), fnv1a(&frames));
-    assert_eq!(h, (GOLDEN.0, GOLDEN.1), "golden rollout changed ({} steps):\n{csv}", rows.len());
+        for r in &rows {
+            csv.push_str(&r.to_csv());
+            csv.push('\n');
+        }
+        ((fnv1a(csv.as_bytes()), fnv1a(&frames)), csv)
+    };
+    let (h, csv) = hash(SimConfig::default());
+    assert_eq!(h, GOLDEN, "golden rollout changed:\n{csv}");
+    // Walkers that ignore the robot: the rollout of every version before walkers yielded.
+    let (h, csv) = hash(SimConfig { pedestrian_yield_m: -1.0, ..SimConfig::default() });
+    assert_eq!(h, GOLDEN_WALKERS_IGNORE_THE_ROBOT, "golden rollout changed:\n{csv}");
 }
-const GOLDEN: (u64, u64) = (3499768905222996766, 14074824012068988481);
+const GOLDEN: (u64, u64) = (15386964748468804694, 16084858126937890107);
+const GOLDEN_WALKERS_IGNORE_THE_ROBOT: (u64, u64) = (3499768905222996766, 14074824012068988481);
 
 #[test]
 fn vec_env_matches_single_envs_and_keeps_final_observations() {
@@ -379,9 +409,14 @@ fn issue_10_no_seeded_start_collides_before_the_policy_can_act() {
         assert!(lost.is_empty(), "{name}: starts lost while standing still (seed, step): {lost:?}");
     }
     // The control: with the pedestrians' paths ignored (only their positions at the reset,
-    // as before issue 10), some `crowd` starts are lost — the test can fail.
+    // as before issue 10) and walkers that ignore the robot (as before issue 38), some
+    // `crowd` starts are lost — the test can fail.
     let crowd = mdrlat_world::builtin::get("crowd").expect("builtin").expect("valid");
-    let blind = SimConfig { spawn_pedestrian_horizon_s: 0.0, ..SimConfig::default() };
+    let blind = SimConfig {
+        spawn_pedestrian_horizon_s: 0.0,
+        pedestrian_yield_m: -1.0,
+        ..SimConfig::default()
+    };
     assert!(!lost_starts(&crowd, &blind, 400).is_empty(), "the control lost no start");
 }
 

@@ -109,6 +109,10 @@ fn eval_args(plan: &Plan, out: &Path, threads: usize) -> Vec<String> {
         e.seed.to_string(),
         "--threads".into(),
         threads.max(1).to_string(),
+        "--min-path".into(),
+        e.min_path_m.to_string(),
+        "--min-reach".into(),
+        e.min_reach_m.to_string(),
     ];
     for w in &e.worlds {
         argv.push("--world".into());

@@ -77,6 +77,21 @@ pub struct EvalSpec {
     /// Episodes drawn for Figs. 6/7, or start/goal pairs for Fig. 9 (0: none).
     #[serde(default)]
     pub figures: u32,
+    /// Metres an episode must drive to count as a moving success (`mdrlat eval --min-path`).
+    #[serde(default = "default_min_path_m")]
+    pub min_path_m: f32,
+    /// Metres from its start an episode must get to count as a moving success
+    /// (`mdrlat eval --min-reach`).
+    #[serde(default = "default_min_reach_m")]
+    pub min_reach_m: f32,
+}
+
+fn default_min_path_m() -> f32 {
+    mdrlat_sim::MovingRule::DEFAULT.min_path_m
+}
+
+fn default_min_reach_m() -> f32 {
+    mdrlat_sim::MovingRule::DEFAULT.min_reach_m
 }
 
 fn default_world() -> String {
@@ -201,12 +216,17 @@ impl Sweep {
             runs: e.runs,
             max_steps: e.max_steps,
             seed: e.seed,
+            moving: mdrlat_sim::MovingRule { min_path_m: e.min_path_m, min_reach_m: e.min_reach_m },
             ..mdrlat_eval::EvalSettings::default()
         };
         settings.validate().map_err(|err| {
             format!(
                 "eval: {}",
-                err.to_string().replace("--max-steps", "max_steps").replace("--", "")
+                err.to_string()
+                    .replace("--max-steps", "max_steps")
+                    .replace("--min-path", "min_path_m")
+                    .replace("--min-reach", "min_reach_m")
+                    .replace("--", "")
             )
         })?;
         for b in &e.baselines {

@@ -50,6 +50,29 @@ pub const PAPER_TABLE2: [(&str, PaperRow); 3] = [
     ),
 ];
 
+/// Why a sweep's results are not comparable with the paper's Table 2 (`None`: they are:
+/// obstacle avoidance, the paper's 400,000 training steps or more, and its protocol of 5 runs
+/// of 50 episodes of 300 steps). A paper number is printed next to comparable results only.
+pub fn not_comparable(sweep: &crate::Sweep) -> Option<String> {
+    let e = &sweep.eval;
+    if sweep.task != Task::Avoid {
+        Some("the paper gives no navigation numbers".into())
+    } else if sweep.steps < 400_000 {
+        Some(format!(
+            "this sweep trains {} steps, the paper 400,000{}",
+            sweep.steps,
+            if sweep.steps < 1000 { " (a pipeline check, not a trained policy)" } else { "" }
+        ))
+    } else if (e.runs, e.episodes, e.max_steps) != (5, 50, 300) {
+        Some(format!(
+            "this sweep evaluates {} runs of {} episodes of {} steps, the paper 5 of 50 of 300",
+            e.runs, e.episodes, e.max_steps
+        ))
+    } else {
+        None
+    }
+}
+
 /// The paper's cell, percent.
 pub fn paper_cell(world: &str, variant: Variant) -> Option<(f64, f64)> {
     PAPER_TABLE2
@@ -99,6 +122,16 @@ impl Method {
     }
 }
 
+/// Which success rate a table or a claim reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Metric {
+    /// The moving success (no collision, and the robot travelled): the headline.
+    Moving,
+    /// The paper's success (no collision within the step budget): the one compared with
+    /// the paper's Table 2.
+    Paper,
+}
+
 /// One cell: a method in a world.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Cell {
@@ -106,7 +139,11 @@ pub struct Cell {
     pub world: String,
     /// The method.
     pub method: Method,
-    /// Success rate of every run of every seed, in seed order (fractions).
+    /// Moving success rate of every run of every seed, in seed order (fractions).
+    pub moving_per_run: Vec<f64>,
+    /// Each seed's mean moving success rate (fractions), in seed order.
+    pub moving_per_seed: Vec<f64>,
+    /// Success rate (the paper's) of every run of every seed, in seed order (fractions).
     pub per_run: Vec<f64>,
     /// Each seed's mean success rate (fractions), in seed order.
     pub per_seed: Vec<f64>,
@@ -124,14 +161,36 @@ impl Cell {
             .then(|| self.path_m.iter().sum::<f64>() / self.path_m.len() as f64)
     }
 
-    /// Mean and population std over all runs of all seeds, percent.
+    /// The paper's success: mean and population std over all runs of all seeds, percent.
     pub fn stats(&self) -> Option<(f64, f64)> {
-        if self.per_run.is_empty() || !self.missing.is_empty() {
+        self.metric_stats(Metric::Paper)
+    }
+
+    /// Each run's rate of `metric`, every seed's runs in seed order.
+    pub fn per_run_of(&self, metric: Metric) -> &[f64] {
+        match metric {
+            Metric::Moving => &self.moving_per_run,
+            Metric::Paper => &self.per_run,
+        }
+    }
+
+    /// Each seed's mean rate of `metric`, in seed order.
+    pub fn per_seed_of(&self, metric: Metric) -> &[f64] {
+        match metric {
+            Metric::Moving => &self.moving_per_seed,
+            Metric::Paper => &self.per_seed,
+        }
+    }
+
+    /// Mean and population std of `metric` over all runs of all seeds, percent.
+    pub fn metric_stats(&self, metric: Metric) -> Option<(f64, f64)> {
+        let per_run = self.per_run_of(metric);
+        if per_run.is_empty() || !self.missing.is_empty() {
             return None;
         }
-        let n = self.per_run.len() as f64;
-        let mean = self.per_run.iter().sum::<f64>() / n;
-        let var = self.per_run.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+        let n = per_run.len() as f64;
+        let mean = per_run.iter().sum::<f64>() / n;
+        let var = per_run.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
         Some((100.0 * mean, 100.0 * var.sqrt()))
     }
 }
@@ -196,6 +255,8 @@ impl Table2 {
                 let mut cell = Cell {
                     world: world.clone(),
                     method: method.clone(),
+                    moving_per_run: Vec::new(),
+                    moving_per_seed: Vec::new(),
                     per_run: Vec::new(),
                     per_seed: Vec::new(),
                     path_m: Vec::new(),
@@ -218,6 +279,8 @@ impl Table2 {
                     };
                     match row {
                         Ok(r) => {
+                            cell.moving_per_run.extend(&r.moving_success_per_run);
+                            cell.moving_per_seed.push(r.moving_success_mean);
                             cell.per_run.extend(&r.success_per_run);
                             cell.per_seed.push(r.success_mean);
                             cell.path_m.push(r.path_m_mean);
@@ -235,9 +298,9 @@ impl Table2 {
         self.cells.iter().find(|c| c.world == world && &c.method == method)
     }
 
-    /// Mean success (percent) of a variant in a world, if complete.
-    pub fn mean(&self, world: &str, v: Variant) -> Option<f64> {
-        self.cell(world, &Method::Variant(v)).and_then(Cell::stats).map(|s| s.0)
+    /// Mean rate of `metric` (percent) of a variant in a world, if complete.
+    pub fn mean(&self, world: &str, v: Variant, metric: Metric) -> Option<f64> {
+        self.cell(world, &Method::Variant(v)).and_then(|c| c.metric_stats(metric)).map(|s| s.0)
     }
 
     /// Every missing evaluation, once each.
@@ -258,48 +321,85 @@ impl Table2 {
         self.cells.iter().all(|c| c.stats().is_some())
     }
 
-    /// `table2.csv`: one row per (world, method); results only.
-    pub fn csv(&self) -> String {
+    /// `table2.csv`: one row per (world, method); results only, the moving success first
+    /// and the rule's thresholds in every row.
+    pub fn csv(&self, plan: &Plan) -> String {
+        let e = &plan.sweep.eval;
         let mut s = String::from(
-            "world,method,seeds,runs,success_mean_pct,success_std_pct,success_per_seed_pct,paper_mean_pct,paper_std_pct,path_m_mean,missing\n",
+            "world,method,seeds,runs,moving_success_mean_pct,moving_success_std_pct,\
+moving_success_per_seed_pct,success_mean_pct,success_std_pct,success_per_seed_pct,paper_mean_pct,\
+paper_std_pct,path_m_mean,min_path_m,min_reach_m,missing\n",
         );
         for c in &self.cells {
-            let (mean, std) = c.stats().map_or((String::new(), String::new()), |(m, d)| {
-                (format!("{m:.2}"), format!("{d:.2}"))
-            });
+            let stats = |metric| {
+                c.metric_stats(metric).map_or((String::new(), String::new()), |(m, d)| {
+                    (format!("{m:.2}"), format!("{d:.2}"))
+                })
+            };
+            let seeds = |metric| {
+                let v: Vec<String> =
+                    c.per_seed_of(metric).iter().map(|x| format!("{:.2}", 100.0 * x)).collect();
+                v.join(";")
+            };
+            let ((mm, ms), (pm_ours, ps_ours)) = (stats(Metric::Moving), stats(Metric::Paper));
             let paper = match &c.method {
-                Method::Variant(v) if self.task == Task::Avoid => paper_cell(&c.world, *v),
+                Method::Variant(v) if not_comparable(&plan.sweep).is_none() => {
+                    paper_cell(&c.world, *v)
+                }
                 _ => None,
             };
             let (pm, ps) = paper.map_or((String::new(), String::new()), |(m, d)| {
                 (format!("{m:.1}"), format!("{d:.1}"))
             });
-            let seeds: Vec<String> =
-                c.per_seed.iter().map(|x| format!("{:.2}", 100.0 * x)).collect();
             let _ = writeln!(
                 s,
-                "{},{},{},{},{mean},{std},{},{pm},{ps},{},{}",
+                "{},{},{},{},{mm},{ms},{},{pm_ours},{ps_ours},{},{pm},{ps},{},{},{},{}",
                 csv_field(&c.world),
                 csv_field(&c.method.name()),
                 c.per_seed.len(),
                 c.per_run.len(),
-                seeds.join(";"),
+                seeds(Metric::Moving),
+                seeds(Metric::Paper),
                 c.path_mean().map_or(String::new(), |p| format!("{p:.3}")),
+                e.min_path_m,
+                e.min_reach_m,
                 csv_field(&c.missing.join("; "))
             );
         }
         s
     }
 
-    /// `table2.md`: the paper's layout (a row per world, a column per method), our
-    /// mean ± std with the paper's beneath.
+    /// One Markdown table: a row per world, a column per method, each cell `cell(world,
+    /// method)`.
+    fn grid(&self, s: &mut String, cell: impl Fn(&str, &Method) -> String) {
+        let _ = write!(s, "| world |");
+        for m in &self.methods {
+            let _ = write!(s, " {} |", m.name());
+        }
+        let _ = write!(s, "\n| --- |");
+        for _ in &self.methods {
+            let _ = write!(s, " --- |");
+        }
+        s.push('\n');
+        for w in &self.worlds {
+            let _ = write!(s, "| {} |", w.replace('|', "\\|"));
+            for m in &self.methods {
+                let _ = write!(s, " {} |", cell(w, m));
+            }
+            s.push('\n');
+        }
+    }
+
+    /// `table2.md`: the paper's layout (a row per world, a column per method): the moving
+    /// success first, then the paper's success with the paper's numbers beneath ours (the
+    /// only table they are comparable with), then the mean collision-free path.
     pub fn markdown(&self, plan: &Plan) -> String {
         let sw = &plan.sweep;
         let mut s = String::new();
         let nav = self.task == Task::Nav;
         let title = if nav { "Navigation" } else { "Table 2" };
-        let _ =
-            writeln!(s, "# {title}: success rate (%) in the unseen worlds — sweep `{}`\n", sw.name);
+        let what = if nav { "success rate (%)" } else { "moving success and success (%)" };
+        let _ = writeln!(s, "# {title}: {what} in the unseen worlds — sweep `{}`\n", sw.name);
         if !self.complete() {
             let missing = self.missing();
             let empty = self.cells.iter().filter(|c| c.stats().is_none()).count();
@@ -313,47 +413,69 @@ impl Table2 {
             }
             s.push('\n');
         }
-        let success = if nav { "the goal reached within" } else { "no collision in" };
-        let paper = if nav {
-            "The paper gives no navigation numbers (its Fig. 9 shows trajectories only)."
-        } else {
-            "Paper (Song et al. 2021, Table 2): 400,000 steps, 5 runs of 50 episodes."
-        };
-        let _ = writeln!(
-            s,
-            "Ours: mean ± population std over {} seed(s) × {} run(s) of {} episodes (success = {success} {} steps), \
-             {} training steps per run in `{}`. {paper}\n",
+        let protocol = format!(
+            "Ours: mean ± population std over {} seed(s) × {} run(s) of {} episodes, {} training \
+             steps per run in `{}`.",
             sw.seeds.len(),
             sw.eval.runs,
             sw.eval.episodes,
-            sw.eval.max_steps,
             sw.steps,
             sw.world
         );
-        let _ = write!(s, "| world |");
-        for m in &self.methods {
-            let _ = write!(s, " {} |", m.name());
-        }
-        let _ = write!(s, "\n| --- |");
-        for _ in &self.methods {
-            let _ = write!(s, " --- |");
-        }
-        s.push('\n');
-        for w in &self.worlds {
-            let _ = write!(s, "| {} |", w.replace('|', "\\|"));
-            for m in &self.methods {
-                let ours = self
-                    .cell(w, m)
-                    .and_then(Cell::stats)
-                    .map_or("—".to_string(), |(a, b)| format!("**{a:.1} ± {b:.1}**"));
-                let paper = match m {
-                    Method::Variant(v) if !nav => paper_cell(w, *v)
-                        .map_or(String::new(), |(a, b)| format!("<br>paper {a:.1} ± {b:.1}")),
-                    _ => String::new(),
-                };
-                let _ = write!(s, " {ours}{paper} |");
+        let ours = |metric: Metric| {
+            move |w: &str, m: &Method| {
+                self.cell(w, m)
+                    .and_then(|c| c.metric_stats(metric))
+                    .map_or("—".to_string(), |(a, b)| format!("**{a:.1} ± {b:.1}**"))
             }
-            s.push('\n');
+        };
+        if nav {
+            let _ = writeln!(
+                s,
+                "{protocol} Success = the goal reached within {} steps. The paper gives no \
+                 navigation numbers (its Fig. 9 shows trajectories only).\n",
+                sw.eval.max_steps
+            );
+            self.grid(&mut s, ours(Metric::Paper));
+        } else {
+            let _ = writeln!(
+                s,
+                "{protocol} **Moving success** = no collision in {} steps *and* at least {} m \
+                 driven *and* at least {} m from the start at some step. **Success** = the \
+                 paper's measure, no collision in {} steps: a policy that turns in place meets \
+                 it (`spin` scores 100 %), so it is shown second. The paper's numbers (Song et \
+                 al. 2021, Table 2: 400,000 steps, 5 runs of 50 episodes) are comparable with \
+                 it alone.\n",
+                sw.eval.max_steps, sw.eval.min_path_m, sw.eval.min_reach_m, sw.eval.max_steps
+            );
+            let _ = writeln!(s, "## Moving success (%)\n");
+            self.grid(&mut s, ours(Metric::Moving));
+            match not_comparable(sw) {
+                None => {
+                    let _ =
+                        writeln!(s, "\n## Success (%), the paper's measure, with the paper's\n");
+                    let paper_ours = ours(Metric::Paper);
+                    self.grid(&mut s, |w, m| {
+                        let paper = match m {
+                            Method::Variant(v) => paper_cell(w, *v)
+                                .map_or(String::new(), |(a, b)| {
+                                    format!("<br>paper {a:.1} ± {b:.1}")
+                                }),
+                            Method::Baseline(_) => String::new(),
+                        };
+                        format!("{}{paper}", paper_ours(w, m))
+                    });
+                }
+                Some(why) => {
+                    let _ = writeln!(s, "\n## Success (%), the paper's measure\n");
+                    self.grid(&mut s, ours(Metric::Paper));
+                    let _ = writeln!(
+                        s,
+                        "\nThe paper's numbers are not printed beside these: {why}. They are in \
+                         `mdrlat reproduce --preset paper`'s table.\n"
+                    );
+                }
+            }
         }
         let _ = writeln!(
             s,
@@ -362,27 +484,13 @@ impl Table2 {
                 "\nMean distance driven per episode (m), every episode (the navigation table has \
                  paths over the episodes that reached their goal).\n"
             } else {
-                "\nMean distance driven per episode (m): success counts episodes without a collision, so a \
-                 policy that turns in place succeeds; this row tells it from one that drives.\n"
+                "\n## Mean collision-free path (m)\n\nDistance driven per episode up to its end or \
+                 its collision.\n"
             }
         );
-        let _ = write!(s, "| world |");
-        for m in &self.methods {
-            let _ = write!(s, " {} |", m.name());
-        }
-        let _ = write!(s, "\n| --- |");
-        for _ in &self.methods {
-            let _ = write!(s, " --- |");
-        }
-        s.push('\n');
-        for w in &self.worlds {
-            let _ = write!(s, "| {} |", w.replace('|', "\\|"));
-            for m in &self.methods {
-                let p = self.cell(w, m).and_then(Cell::path_mean);
-                let _ = write!(s, " {} |", p.map_or("—".into(), |p| format!("{p:.1}")));
-            }
-            s.push('\n');
-        }
+        self.grid(&mut s, |w, m| {
+            self.cell(w, m).and_then(Cell::path_mean).map_or("—".into(), |p| format!("{p:.1}"))
+        });
         s
     }
 }
@@ -476,8 +584,8 @@ pub struct Claim {
     pub detail: String,
 }
 
-/// The paper's ordering (section 3.2), checked world by world.
-pub fn claims(t: &Table2) -> Vec<Claim> {
+/// The paper's ordering (section 3.2), checked world by world on `metric`.
+pub fn claims(t: &Table2, metric: Metric) -> Vec<Claim> {
     use Variant::*;
     let multi = [Multi, MultiAt, MultiBf, Mdrlat];
     let single = [LaserOnly, DepthOnly];
@@ -498,7 +606,7 @@ pub fn claims(t: &Table2) -> Vec<Claim> {
         }
         Claim { claim, holds, detail: detail.join("; ") }
     };
-    let m = |w: &str, v: Variant| t.mean(w, v);
+    let m = |w: &str, v: Variant| t.mean(w, v, metric);
     out.push(check("every multi-sensor method beats both single-sensor ones", &|w| {
         let lo = multi.iter().map(|&v| m(w, v).map(|x| (v, x))).collect::<Option<Vec<_>>>()?;
         let hi = single.iter().map(|&v| m(w, v).map(|x| (v, x))).collect::<Option<Vec<_>>>()?;
@@ -674,32 +782,38 @@ pub fn report(plan: &Plan, t: &Table2) -> String {
     }
     let _ = writeln!(s, "\n[Table 2](table2.md) · [CSV](table2.csv) · [Fig. 4](fig4.png)\n");
     s.push_str(&t.markdown(plan).replacen("# Table 2", "## Table 2", 1));
-    let _ = writeln!(s, "\n## Does the paper's ordering hold here?\n");
-    for c in claims(t) {
-        let worlds = c.detail.matches("(yes)").count();
-        let verdict = match c.holds {
-            Some(true) => "**holds** in every world".to_string(),
-            Some(false) => {
-                format!("**does not hold** (holds in {worlds} of {} worlds)", t.worlds.len())
-            }
-            None => "cannot be checked (variants or results missing)".to_string(),
+    for (metric, heading) in [
+        (Metric::Moving, "Does the paper's ordering hold here, by moving success?"),
+        (Metric::Paper, "Does it hold by the paper's success?"),
+    ] {
+        let _ = writeln!(s, "\n## {heading}\n");
+        let claims_all = claims(t, metric);
+        for c in &claims_all {
+            let worlds = c.detail.matches("(yes)").count();
+            let verdict = match c.holds {
+                Some(true) => "**holds** in every world".to_string(),
+                Some(false) => {
+                    format!("**does not hold** (holds in {worlds} of {} worlds)", t.worlds.len())
+                }
+                None => "cannot be checked (variants or results missing)".to_string(),
+            };
+            let _ = writeln!(s, "- {}: {verdict}. {}", c.claim, c.detail);
+        }
+        let verdict = if claims_all.iter().all(|c| c.holds == Some(true)) {
+            "The paper's ordering holds in our simulator."
+        } else if claims_all.iter().any(|c| c.holds == Some(false)) {
+            "The paper's ordering does **not** fully hold in our simulator with these settings (see above)."
+        } else {
+            "Not enough results to check the paper's ordering."
         };
-        let _ = writeln!(s, "- {}: {verdict}. {}", c.claim, c.detail);
+        let _ = writeln!(s, "\n{verdict}");
     }
-    let claims_all = claims(t);
-    let verdict = if claims_all.iter().all(|c| c.holds == Some(true)) {
-        "The paper's ordering holds in our simulator."
-    } else if claims_all.iter().any(|c| c.holds == Some(false)) {
-        "The paper's ordering does **not** fully hold in our simulator with these settings (see above)."
-    } else {
-        "Not enough results to check the paper's ordering."
-    };
     let _ = writeln!(
         s,
-        "\n{verdict} Differences smaller than the std over runs are within noise. Success is the \
-         paper's measure (no collision within {} steps); a policy that turns in place meets it, so \
-         read it beside the distance driven in the table above.\n",
-        sw.eval.max_steps
+        "\nDifferences smaller than the std over runs are within noise. The moving success asks \
+         for no collision in {} steps and at least {} m driven and {} m from the start; the \
+         paper's success asks for no collision only, which a policy turning in place meets.\n",
+        sw.eval.max_steps, sw.eval.min_path_m, sw.eval.min_reach_m
     );
     let _ = writeln!(s, "## Figures\n\n![Fig. 4: evaluation reward during training](fig4.png)\n");
     if let Some(fig) = plan
@@ -735,7 +849,7 @@ pub fn report(plan: &Plan, t: &Table2) -> String {
 /// incomplete, after writing it).
 pub fn write(plan: &Plan) -> Result<Table2, SweepError> {
     let t = Table2::gather(plan)?;
-    write_atomic(&plan.dir.join("table2.csv"), t.csv().as_bytes())?;
+    write_atomic(&plan.dir.join("table2.csv"), t.csv(plan).as_bytes())?;
     write_atomic(&plan.dir.join("table2.md"), t.markdown(plan).as_bytes())?;
     if let Some(md) = navigation(plan) {
         write_atomic(&plan.dir.join("navigation.md"), md.as_bytes())?;
@@ -757,6 +871,8 @@ mod tests {
             .map(|&(v, x)| Cell {
                 world: "office".into(),
                 method: Method::Variant(v),
+                moving_per_run: vec![x / 2.0; 2],
+                moving_per_seed: vec![x / 2.0],
                 per_run: vec![x - 0.01, x + 0.01],
                 per_seed: vec![x],
                 path_m: vec![10.0],
@@ -771,16 +887,19 @@ mod tests {
         use Variant::*;
         let paper: Vec<(Variant, f64)> =
             PAPER_TABLE2[0].1.iter().map(|c| (c.0, c.1 / 100.0)).collect();
-        let c = claims(&table(&paper));
+        let c = claims(&table(&paper), Metric::Paper);
         assert!(c.iter().all(|c| c.holds == Some(true)), "{c:?}");
+        let c = claims(&table(&paper), Metric::Moving);
+        assert!(c.iter().all(|c| c.holds == Some(true)), "{c:?}");
+        assert!(c[1].detail.contains("multi-bf 44.8 vs multi 38.4"), "{}", c[1].detail);
         let swapped: Vec<(Variant, f64)> =
             paper.iter().map(|&(v, x)| (v, if v == Multi { 0.99 } else { x })).collect();
-        let c = claims(&table(&swapped));
+        let c = claims(&table(&swapped), Metric::Paper);
         assert_eq!(c[0].holds, Some(true));
         assert_eq!(c[1].holds, Some(false), "{}", c[1].detail);
         assert!(c[1].detail.contains("multi-bf 89.6 vs multi 99.0"), "{}", c[1].detail);
         assert_eq!(c[3].holds, Some(false));
-        let only_two = claims(&table(&[(LaserOnly, 0.5), (Mdrlat, 0.6)]));
+        let only_two = claims(&table(&[(LaserOnly, 0.5), (Mdrlat, 0.6)]), Metric::Paper);
         assert!(only_two.iter().all(|c| c.holds.is_none()));
     }
 
@@ -794,18 +913,34 @@ mod tests {
         plan.mark_failed(&job, "exit status: 1").expect("mark");
         let t = Table2::gather(&plan).expect("gather");
         assert!(!t.complete());
-        let csv = t.csv();
+        let csv = t.csv(&plan);
         assert_eq!(csv.lines().count(), 1 + 3 * 7, "{csv}");
         assert!(
             csv.contains(
-                "office,multi,0,0,,,,76.8,4.1,,eval/multi-s0 failed (see logs/eval-multi-s0.log)"
+                "office,multi,0,0,,,,,,,,,,5,2,eval/multi-s0 failed (see logs/eval-multi-s0.log)"
             ),
             "{csv}"
         );
         assert!(csv.contains("eval/mdrlat-s0 not run (train/mdrlat-s0 not finished)"), "{csv}");
         let md = t.markdown(&plan);
         assert!(md.contains("**Incomplete: 21 of 21 cells have no result**"), "{md}");
+        // 300 steps are not the paper's 400,000: no paper number beside them.
+        assert!(!md.contains("paper 67.6"), "{md}");
+        assert!(md.contains("not printed beside these: this sweep trains 300 steps"), "{md}");
+        let paper = Plan::new(Sweep::preset("paper").expect("paper"), &dir);
+        assert!(paper.sweep.steps == 400_000 && not_comparable(&paper.sweep).is_none());
+        let t = Table2::gather(&paper).expect("gather");
+        let md = t.markdown(&paper);
         assert!(md.contains("| office | —<br>paper 67.6 ± 4.8 |"), "{md}");
+        assert!(
+            t.csv(&paper).contains("office,laser-only,0,0,,,,,,,67.6,4.8,"),
+            "{}",
+            t.csv(&paper)
+        );
+        let moving = md.find("## Moving success (%)").expect("moving table");
+        let paper = md.find("## Success (%), the paper's measure").expect("paper table");
+        assert!(moving < paper, "the moving success leads: {md}");
+        assert!(md.contains("at least 5 m driven *and* at least 2 m from the start"), "{md}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -13,6 +13,7 @@ use mdrlat_eval::{
     navigation_markdown, pick_episodes, summary_csv, summary_markdown,
 };
 use mdrlat_plan::MapSource;
+use mdrlat_sim::MovingRule;
 use mdrlat_sim::config::Task;
 use mdrlat_train::GreedyPolicy;
 use std::path::{Path, PathBuf};
@@ -56,6 +57,14 @@ pub struct Args {
     /// Seed of the start poses: the same seed gives every method the same starts.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     seed: u64,
+    /// Metres an episode must drive to count as a moving success (beside the paper's
+    /// success, which a policy turning in place meets).
+    #[arg(long, default_value_t = MovingRule::DEFAULT.min_path_m, value_name = "M", allow_negative_numbers = true)]
+    min_path: f32,
+    /// Metres from its start an episode must get at some step to count as a moving success
+    /// (a policy circling on the spot drives far but gets nowhere).
+    #[arg(long, default_value_t = MovingRule::DEFAULT.min_reach_m, value_name = "M", allow_negative_numbers = true)]
+    min_reach: f32,
     /// Output directory: episodes.csv, summary.csv, summary.md (and figures/).
     #[arg(long)]
     out: PathBuf,
@@ -143,6 +152,7 @@ pub fn run(a: &Args) -> Result<()> {
             a.envs
         },
         sim_threads: a.sim_threads,
+        moving: MovingRule { min_path_m: a.min_path, min_reach_m: a.min_reach },
     };
     settings.validate()?;
     if a.forward_batch == 0 || a.forward_batch > 4096 {
@@ -220,10 +230,12 @@ pub fn run(a: &Args) -> Result<()> {
         let base = pb.position();
         let mut on_progress = |p: &mdrlat_eval::Progress<'_>| {
             pb.set_position(base + p.done as u64);
+            let pct = |n: usize| 100.0 * n as f64 / p.done.max(1) as f64;
             pb.set_message(format!(
-                "{} {:.0}% ok",
+                "{} {:.0}% moving, {:.0}% no collision",
                 p.world,
-                100.0 * p.successes as f64 / p.done.max(1) as f64
+                pct(p.moving_successes),
+                pct(p.successes)
             ));
         };
         let e = evaluate_world(world, &config.sim, policy, &settings, &mut on_progress)
@@ -258,10 +270,13 @@ pub fn run(a: &Args) -> Result<()> {
                     .map(|g| format!(", network at {g:.1} GFLOP/s"))
                     .unwrap_or_default();
                 out!(
-                    "{:<10} success {:>5.1} ± {:>4.1} %  ({} collisions: {} bumper, {} pedestrian, {} laser)  {:.1} s, {:.0} decisions/s{rate}",
+                    "{:<10} moving success {:>5.1} ± {:>4.1} %  (paper's success {:>5.1} ± {:>4.1} %, path {:.1} m)  ({} collisions: {} bumper, {} pedestrian, {} laser)  {:.1} s, {:.0} decisions/s{rate}",
                     summary.world,
+                    100.0 * summary.moving_success_mean,
+                    100.0 * summary.moving_success_std,
                     100.0 * summary.success_mean,
                     100.0 * summary.success_std,
+                    summary.path_m_mean,
                     summary.collisions_bumper
                         + summary.collisions_pedestrian
                         + summary.collisions_laser,
@@ -278,7 +293,7 @@ pub fn run(a: &Args) -> Result<()> {
     }
     pb.finish_and_clear();
 
-    write(&a.out.join("episodes.csv"), &episodes_csv(&evals))?;
+    write(&a.out.join("episodes.csv"), &episodes_csv(&evals, &settings.moving))?;
     write(&a.out.join("summary.csv"), &summary_csv(&summaries))?;
     write(&a.out.join("summary.md"), &summary_markdown(&summaries))?;
     let mut written = vec!["episodes.csv", "summary.csv", "summary.md"];
