@@ -434,6 +434,30 @@ fn plot_draws_runs_and_rejects_bad_files() {
     let o = mdrlat(&["plot", run.to_str().expect("utf8"), "--out", png.to_str().expect("utf8")]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(std::fs::metadata(&png).expect("png").len() > 1000);
+    let size = |p: &std::path::Path| {
+        let decoder =
+            png::Decoder::new(std::io::BufReader::new(std::fs::File::open(p).expect("png")));
+        let info = decoder.read_info().expect("png header");
+        (info.info().width, info.info().height)
+    };
+    let (w1, h1) = size(&png);
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("1 curves, smoothing"),
+        "no curve panels for an old run"
+    );
+    // A run with learning curves gets a panel each for moving success, success and path.
+    std::fs::write(
+        run.join("eval.csv"),
+        "step,eval_reward_mean,eval_reward_std,eval_length_mean,eval_success_rate,eval_collision_rate,\
+train_moving_success,train_success,train_path_m,unseen_moving_success,unseen_success,unseen_path_m\n\
+5000,1.0,0.5,10,0,1,0.1,0.5,3.0,0.0,0.4,2.0\n10000,3.0,1.0,20,0,1,0.3,0.6,6.0,0.2,0.5,5.0\n",
+    )
+    .expect("write");
+    let o = mdrlat(&["plot", run.to_str().expect("utf8"), "--out", png.to_str().expect("utf8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("3 learning-curve panels"));
+    let (w2, h2) = size(&png);
+    assert!(w2 > 2 * w1 - 100 && h2 > 2 * h1 - 100, "a 2 x 2 grid: {w1}x{h1} -> {w2}x{h2}");
     std::fs::write(run.join("eval.csv"), "step,eval_reward_mean,eval_reward_std\n5000,abc,0.5\n")
         .expect("write");
     let o = mdrlat(&["plot", run.to_str().expect("utf8"), "--out", png.to_str().expect("utf8")]);

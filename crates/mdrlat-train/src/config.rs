@@ -42,8 +42,19 @@ pub struct TrainConfig {
     pub eval_interval: u64,
     /// Episodes per evaluation, from fixed start poses.
     pub eval_episodes: u32,
-    /// Seed of the fixed evaluation start poses (the same for every run and variant).
+    /// Seed of the fixed evaluation start poses (the same for every run and variant), of the
+    /// Fig. 4 episodes and of the learning curves' held-out starts.
     pub eval_seed: u64,
+    /// Episodes per world of the learning curves: at every evaluation the greedy policy runs
+    /// this many episodes of the evaluation protocol (300 steps, starts of `mdrlat eval
+    /// --seed EVAL_SEED`, run 0) in the training world and in `curve_world`, and its moving
+    /// success, paper success and mean path go into `eval.csv`, TensorBoard and Fig. 4
+    /// (0: no curves).
+    pub curve_episodes: u32,
+    /// The unseen world of the learning curves: a built-in name, a `.toml` world file or a
+    /// map_server `.yaml`; `auto`: the task's first test world (`office`, or `nav-test` in
+    /// navigation); `none`: the training world only.
+    pub curve_world: String,
     /// Steps between checkpoints.
     pub checkpoint_interval: u64,
 }
@@ -69,6 +80,8 @@ impl Default for TrainConfig {
             eval_interval: 5_000,
             eval_episodes: 5,
             eval_seed: 1_000_000,
+            curve_episodes: 20,
+            curve_world: "auto".into(),
             checkpoint_interval: 10_000,
         }
     }
@@ -136,6 +149,15 @@ impl TrainConfig {
         if self.eval_episodes == 0 {
             return err("train.eval_episodes", "must be at least 1".into());
         }
+        if self.curve_episodes > 1000 {
+            return err(
+                "train.curve_episodes",
+                format!("{} is above 1,000 episodes per world and evaluation", self.curve_episodes),
+            );
+        }
+        if self.curve_world.trim().is_empty() {
+            return err("train.curve_world", "empty: name a world, or say 'auto' or 'none'".into());
+        }
         if self.learning_starts < self.batch_size as u64 {
             return err(
                 "train.learning_starts",
@@ -170,6 +192,20 @@ impl TrainConfig {
             );
         }
         Ok(())
+    }
+
+    /// The learning curves' unseen world for `task`: `None` when the curves are off or
+    /// only the training world is wanted.
+    pub fn curve_world_for(&self, task: mdrlat_sim::config::Task) -> Option<String> {
+        match self.curve_world.as_str() {
+            _ if self.curve_episodes == 0 => None,
+            "none" => None,
+            "auto" => Some(match task {
+                mdrlat_sim::config::Task::Avoid => "office".into(),
+                mdrlat_sim::config::Task::Nav => "nav-test".into(),
+            }),
+            w => Some(w.to_string()),
+        }
     }
 
     /// ε at environment step `step` (linear decay, then constant).
@@ -211,6 +247,10 @@ mod tests {
         assert!(e.contains("train.learning_starts") && e.contains("never"), "{e}");
         let e = bad(TrainConfig { eval_episodes: 0, ..Default::default() });
         assert!(e.contains("train.eval_episodes"), "{e}");
+        let e = bad(TrainConfig { curve_episodes: 5000, ..Default::default() });
+        assert!(e.contains("train.curve_episodes"), "{e}");
+        let e = bad(TrainConfig { curve_world: " ".into(), ..Default::default() });
+        assert!(e.contains("train.curve_world") && e.contains("'none'"), "{e}");
         let e = bad(TrainConfig { replay_capacity: 10_000_000, ..Default::default() });
         assert!(e.contains("train.replay_capacity"), "{e}");
     }

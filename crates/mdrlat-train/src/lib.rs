@@ -18,7 +18,7 @@ pub use config::{TrainConfig, TrainConfigError};
 pub use learner::{Inputs, Learner, Losses};
 pub use policy::{GreedyPolicy, observation_inputs};
 pub use replay::{Batch, DepthFrames, DepthLayout, ReplayBuffer, Transition};
-pub use train::{Evaluation, Status, Timing, TrainError, TrainReport, evaluate, train};
+pub use train::{CurvePoint, Evaluation, Status, Timing, TrainError, TrainReport, evaluate, train};
 
 /// Readies the process for work on `device`. On a LibTorch GPU, LibTorch's CPU thread pool
 /// shrinks to one thread: with one thread a core it took the cores from rayon's threads

@@ -16,6 +16,7 @@ use mdrlat_sim::{
     VecEnv, run_episodes,
 };
 use mdrlat_world::World;
+use serde::Serialize;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -50,6 +51,24 @@ pub enum TrainError {
         step: u64,
         /// What went wrong.
         source: RunError,
+    },
+    /// A learning curve's evaluation failed.
+    #[error("learning curve in '{world}' at step {step}: {source}")]
+    Curve {
+        /// Environment step.
+        step: u64,
+        /// The world.
+        world: String,
+        /// What went wrong.
+        source: Box<mdrlat_eval::EvalError>,
+    },
+    /// The learning curves' unseen world cannot be loaded.
+    #[error("train.curve_world '{spec}': {source}")]
+    CurveWorld {
+        /// The world as given.
+        spec: String,
+        /// What is wrong with it.
+        source: mdrlat_world::WorldError,
     },
     /// A checkpoint is missing, corrupt or of another run.
     #[error("{path}: {problem}")]
@@ -98,6 +117,23 @@ pub struct Evaluation {
     /// Whether each episode succeeded (`mdrlat_sim::episode_success`): no collision in
     /// obstacle avoidance, the goal reached in navigation.
     pub successes: Vec<bool>,
+    /// The learning curves' points at this step: held-out starts of the training world
+    /// first, then the unseen world (none when `curve_episodes` is 0).
+    pub curves: Vec<CurvePoint>,
+}
+
+/// A learning curve's point: the greedy policy in one world by the evaluation protocol
+/// (`mdrlat eval`'s episodes, 300 steps, one run of `curve_episodes` episodes).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CurvePoint {
+    /// The world.
+    pub world: String,
+    /// Moving success rate (no collision, at least 5 m driven and 2 m from the start).
+    pub moving_success: f64,
+    /// The paper's success rate (no collision within 300 steps).
+    pub success: f64,
+    /// Mean collision-free path, metres.
+    pub path_m: f64,
 }
 
 impl Evaluation {
@@ -226,7 +262,9 @@ impl Csv {
 
 /// Greedy episodes of the learner's online network from the fixed start poses
 /// `eval_seed + k` (the same for every run), one per environment of `venv`, through the
-/// episode runner; each runs to the environment's own end (collision or time limit).
+/// episode runner; each runs to the environment's own end (collision or time limit). Then
+/// the learning curves: the same policy in each of `curve_worlds` by the evaluation protocol
+/// ([`mdrlat_eval::evaluate_world`], the one `mdrlat eval` runs).
 ///
 /// # Errors
 /// The simulator failed to reset, or the network could not decide.
@@ -234,6 +272,8 @@ pub fn evaluate(
     venv: &mut VecEnv,
     learner: &Learner,
     config: &TrainConfig,
+    sim: &SimConfig,
+    curve_worlds: &[World],
     step: u64,
 ) -> Result<Evaluation, TrainError> {
     let eval_error = |source| TrainError::Evaluation { step, source };
@@ -248,12 +288,37 @@ pub fn evaluate(
         .collect();
     let outcomes = run_episodes(venv, &mut policy, &specs, &RunOptions::default(), &mut Quiet)
         .map_err(eval_error)?;
+    let settings = mdrlat_eval::EvalSettings {
+        episodes: config.curve_episodes,
+        runs: 1,
+        seed: config.eval_seed,
+        envs: (config.curve_episodes as usize).clamp(1, 64),
+        sim_threads: 1,
+        ..mdrlat_eval::EvalSettings::default()
+    };
+    let mut curves = Vec::with_capacity(curve_worlds.len());
+    for world in curve_worlds {
+        let e = mdrlat_eval::evaluate_world(world, sim, &mut policy, &settings, &mut |_| {})
+            .map_err(|source| TrainError::Curve {
+                step,
+                world: world.name.clone(),
+                source: Box::new(source),
+            })?;
+        let s = mdrlat_eval::WorldSummary::new("curve", &e, &settings);
+        curves.push(CurvePoint {
+            world: world.name.clone(),
+            moving_success: s.moving_success_mean,
+            success: s.success_mean,
+            path_m: s.path_m_mean,
+        });
+    }
     Ok(Evaluation {
         step,
         rewards: outcomes.iter().map(|o| o.reward).collect(),
         lengths: outcomes.iter().map(|o| o.steps).collect(),
         collisions: outcomes.iter().map(|o| o.collision.is_some()).collect(),
         successes: outcomes.iter().map(|o| o.success()).collect(),
+        curves,
     })
 }
 
@@ -292,9 +357,12 @@ fn reopen(path: PathBuf, header: &str, step: u64, keep_step: bool) -> Result<Csv
 /// The header of `metrics.csv`.
 const METRICS_HEADER: &str =
     "step,loss_td,loss_at,q_mean,epsilon,episode_reward,episode_length,episodes";
-/// The header of `eval.csv`.
-const EVAL_HEADER: &str =
-    "step,eval_reward_mean,eval_reward_std,eval_length_mean,eval_success_rate,eval_collision_rate";
+/// The header of `eval.csv`: Fig. 4's reward on fixed starts of the training world, then
+/// the learning curves (held-out starts of the training world, then the unseen world named
+/// in `config.toml`'s `train.curve_world`; empty where a run has no curves).
+pub const EVAL_HEADER: &str = "step,eval_reward_mean,eval_reward_std,eval_length_mean,\
+eval_success_rate,eval_collision_rate,train_moving_success,train_success,train_path_m,\
+unseen_moving_success,unseen_success,unseen_path_m";
 
 /// Trains `config.variant` in `world` for `config.total_steps` steps on `device`, writing
 /// `metrics.csv`, `eval.csv` and checkpoints into `dir` (which must exist); with `resume`,
@@ -315,6 +383,16 @@ pub fn train(
     config.validate()?;
     let (task, nav) = (sim.task, sim.task == Task::Nav);
     let started = Instant::now();
+    // The learning curves' worlds: the training world's held-out starts, then the unseen one.
+    let mut curve_worlds = Vec::new();
+    if config.curve_episodes > 0 {
+        curve_worlds.push(world.clone());
+        if let Some(spec) = config.curve_world_for(task) {
+            let unseen = mdrlat_world::load(&spec)
+                .map_err(|source| TrainError::CurveWorld { spec: spec.clone(), source })?;
+            curve_worlds.push(unseen);
+        }
+    }
     let scene = Arc::new(StaticScene::new(Arc::new(world), sim));
     let mut env = Env::new(scene.clone(), sim.clone())?;
     // One environment per evaluation episode, stepped on this thread, the network deciding
@@ -505,28 +583,43 @@ pub fn train(
         }
         timing.output += lap.split();
         if t % config.eval_interval == 0 {
-            let e = evaluate(&mut eval_envs, &learner, config, t)?;
+            let e = evaluate(&mut eval_envs, &learner, config, sim, &curve_worlds, t)?;
             let mean_len = e.lengths.iter().map(|&l| f64::from(l)).sum::<f64>()
                 / e.lengths.len().max(1) as f64;
+            // The curves' columns: held-out training starts, then the unseen world.
+            let mut curve_cells = String::new();
+            for k in 0..2 {
+                match e.curves.get(k) {
+                    Some(c) => curve_cells.push_str(&format!(
+                        ",{:.6},{:.6},{:.3}",
+                        c.moving_success, c.success, c.path_m
+                    )),
+                    None => curve_cells.push_str(",,,"),
+                }
+            }
             evals_csv.line(&format!(
-                "{t},{:.6},{:.6},{mean_len:.2},{:.6},{:.6}",
+                "{t},{:.6},{:.6},{mean_len:.2},{:.6},{:.6}{curve_cells}",
                 e.mean(),
                 e.std(),
                 e.success_rate(),
                 e.collision_rate()
             ))?;
-            events
-                .scalars(
-                    t,
-                    &[
-                        ("eval/reward_mean", e.mean()),
-                        ("eval/reward_std", e.std()),
-                        ("eval/length_mean", mean_len as f32),
-                        ("eval/success_rate", e.success_rate()),
-                        ("eval/collision_rate", e.collision_rate()),
-                    ],
-                )
-                .map_err(|e| tb_err(&events, e))?;
+            let mut scalars = vec![
+                ("eval/reward_mean".to_string(), e.mean()),
+                ("eval/reward_std".to_string(), e.std()),
+                ("eval/length_mean".to_string(), mean_len as f32),
+                ("eval/success_rate".to_string(), e.success_rate()),
+                ("eval/collision_rate".to_string(), e.collision_rate()),
+            ];
+            for (c, which) in e.curves.iter().zip(["train", "unseen"]) {
+                scalars.extend([
+                    (format!("curves/{which}_moving_success"), c.moving_success as f32),
+                    (format!("curves/{which}_success"), c.success as f32),
+                    (format!("curves/{which}_path_m"), c.path_m as f32),
+                ]);
+            }
+            let named: Vec<(&str, f32)> = scalars.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+            events.scalars(t, &named).map_err(|e| tb_err(&events, e))?;
             evals_csv.flush()?;
             status.last_eval = Some(e.mean());
             report.evaluations.push(e);
@@ -584,17 +677,17 @@ mod tests {
                    5000,1.0,0.5,10.00\n10000,2.0,0.5,20.00\n15000,3.0,0.5,30.00\n";
         std::fs::write(&path, old).expect("write");
         let mut csv = reopen(path.clone(), EVAL_HEADER, 10_000, true).expect("reopen");
-        csv.line("15000,4.0,0.5,40.00,0.200000,0.800000").expect("append");
+        csv.line("15000,4.0,0.5,40.00,0.200000,0.800000,0.1,0.2,3.0,0.1,0.2,3.0").expect("append");
         csv.flush().expect("flush");
         let text = std::fs::read_to_string(&path).expect("read");
         assert_eq!(
             text,
             format!(
-                "{EVAL_HEADER}\n5000,1.0,0.5,10.00,,\n10000,2.0,0.5,20.00,,\n15000,4.0,0.5,40.00,0.200000,0.800000\n"
+                "{EVAL_HEADER}\n5000,1.0,0.5,10.00,,,,,,,,\n10000,2.0,0.5,20.00,,,,,,,,\n15000,4.0,0.5,40.00,0.200000,0.800000,0.1,0.2,3.0,0.1,0.2,3.0\n"
             )
         );
         for line in text.lines() {
-            assert_eq!(line.split(',').count(), 6, "{line}");
+            assert_eq!(line.split(',').count(), 12, "{line}");
         }
         // A file with the current header is kept as it is.
         let mut csv = reopen(path.clone(), EVAL_HEADER, 20_000, true).expect("reopen");

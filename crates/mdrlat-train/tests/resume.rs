@@ -190,3 +190,52 @@ fn two_runs_with_one_seed_write_the_same_file_bytes() {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+/// Issue 38: every evaluation also measures the greedy policy by the evaluation protocol on
+/// held-out starts of the training world and in an unseen world (moving success, the paper's
+/// success, mean path), into `eval.csv` beside Fig. 4's reward.
+#[test]
+fn learning_curves_measure_the_training_world_and_an_unseen_one() {
+    let dev = Device::flex();
+    let curves = |c: TrainConfig, name: &str| -> Vec<Vec<String>> {
+        let d = dir(name);
+        let (report, _) = train(world(), &sim(), &c, &dev, &d, false, |_| {}).expect("run");
+        let text = read(&d, "eval.csv");
+        let mut lines = text.lines();
+        let header = lines.next().expect("header");
+        assert_eq!(header, mdrlat_train::train::EVAL_HEADER);
+        let rows: Vec<Vec<String>> =
+            lines.map(|l| l.split(',').map(str::to_string).collect()).collect();
+        assert_eq!(rows.len(), report.evaluations.len());
+        for (row, e) in rows.iter().zip(&report.evaluations) {
+            assert_eq!(row.len(), 12, "{row:?}");
+            for (k, c) in e.curves.iter().enumerate() {
+                assert_eq!(row[6 + 3 * k], format!("{:.6}", c.moving_success));
+                assert!(c.moving_success <= c.success && (0.0..=1.0).contains(&c.success));
+                assert!(c.path_m >= 0.0);
+            }
+        }
+        rows
+    };
+    let base = TrainConfig { curve_episodes: 4, ..config(Variant::LaserOnly, 150) };
+    let rows = curves(base.clone(), "curves");
+    assert!(rows[0][6..].iter().all(|c| !c.is_empty()), "{:?}", rows[0]);
+    let rows = curves(TrainConfig { curve_world: "none".into(), ..base.clone() }, "train-only");
+    assert!(
+        rows[0][6..9].iter().all(|c| !c.is_empty()) && rows[0][9..].iter().all(String::is_empty)
+    );
+    let rows = curves(TrainConfig { curve_episodes: 0, ..base.clone() }, "no-curves");
+    assert!(rows[0][6..].iter().all(String::is_empty), "{:?}", rows[0]);
+    let e = train(
+        world(),
+        &sim(),
+        &TrainConfig { curve_world: "nowhere".into(), ..base },
+        &dev,
+        &dir("bad-world"),
+        false,
+        |_| {},
+    )
+    .map(|_| ())
+    .expect_err("unknown world");
+    assert!(e.to_string().contains("train.curve_world 'nowhere'"), "{e}");
+}

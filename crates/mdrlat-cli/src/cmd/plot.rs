@@ -1,14 +1,19 @@
-//! `mdrlat plot`: smoothed training curves of several runs (paper Fig. 4).
+//! `mdrlat plot`: smoothed training curves of several runs (paper Fig. 4): the greedy
+//! reward, and where the runs have them the learning curves in the metric that matters
+//! (moving success, the paper's success, mean path; held-out starts of the training world
+//! and an unseen world), a panel each.
 
 use super::ensure_parent;
 use anyhow::{Context, Result, bail};
-use mdrlat_render::{Chart, Series, line_chart};
+use mdrlat_render::{Chart, Image, Series, line_chart, side_by_side, stacked};
 use std::path::{Path, PathBuf};
 
 /// What to plot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Metric {
-    /// Greedy evaluation reward (eval.csv), mean ± std band: Fig. 4.
+    /// Fig. 4: greedy evaluation reward (eval.csv), mean ± std band; beside it a panel each
+    /// for the learning curves' moving success, success and mean path (held-out starts of
+    /// the training world and the unseen world), where eval.csv has them.
     Eval,
     /// Training episode reward (metrics.csv).
     EpisodeReward,
@@ -72,6 +77,32 @@ fn average_by_variant(series: Vec<(String, Series)>) -> Vec<Series> {
             Series { label: format!("{variant} ({} runs)", runs.len()), points, band }
         })
         .collect()
+}
+
+/// The learning curves' panels of Fig. 4: (`eval.csv` column after `train_`/`unseen_`,
+/// title, y label).
+const CURVE_PANELS: [(&str, &str, &str); 3] = [
+    (
+        "moving_success",
+        "Moving success (no collision in 300 steps, >= 5 m driven, >= 2 m from the start)",
+        "rate",
+    ),
+    ("success", "Success, the paper's measure (no collision in 300 steps)", "rate"),
+    ("path_m", "Mean collision-free path per episode", "metres"),
+];
+
+/// Whether a CSV file's header has every one of `columns`.
+fn has_columns(path: &Path, columns: &[&str]) -> bool {
+    std::fs::read_to_string(path).is_ok_and(|t| {
+        let header: Vec<&str> = t.lines().next().unwrap_or_default().split(',').collect();
+        columns.iter().all(|c| header.contains(c))
+    })
+}
+
+/// The unseen world of a run's learning curves, from its `config.toml`.
+fn curve_world(dir: &Path) -> Option<String> {
+    let config = crate::config::Config::load_or_default(Some(&dir.join("config.toml"))).ok()?;
+    config.train.curve_world_for(config.sim.task)
 }
 
 /// Rows of a CSV file as (column name → values); empty cells are NaN.
@@ -208,15 +239,96 @@ pub fn run(a: &Args) -> Result<()> {
         Metric::LossTd => ("TD loss (eq. 13)", "loss"),
         Metric::LossAt => ("Auxiliary loss (eq. 12)", "loss"),
     };
+    let (width, height) = (1000, 620);
     let img = line_chart(
         &Chart { title, x_label: "training steps", y_label: y, series: &series },
-        1000,
-        620,
+        width,
+        height,
     );
+    let panels = if a.metric == Metric::Eval { curve_panels(a)? } else { Vec::new() };
+    let img = if panels.is_empty() {
+        img
+    } else {
+        // A 2 × 2 grid: the reward (the paper's Fig. 4), then the curves that matter.
+        let charts: Vec<Image> = panels
+            .iter()
+            .map(|(title, y, series)| {
+                line_chart(
+                    &Chart { title, x_label: "training steps", y_label: y, series },
+                    width,
+                    height,
+                )
+            })
+            .collect();
+        let mut all: Vec<&Image> = vec![&img];
+        all.extend(charts.iter());
+        let rows: Vec<Image> = all.chunks(2).map(|pair| side_by_side(pair, 16)).collect();
+        stacked(&rows.iter().collect::<Vec<_>>(), 16)
+    };
     ensure_parent(&a.out)?;
     img.save_png(&a.out)?;
-    out!("wrote {} ({} curves, smoothing {})", a.out.display(), series.len(), a.smooth);
+    out!(
+        "wrote {} ({} curves{}, smoothing {})",
+        a.out.display(),
+        series.len(),
+        if panels.is_empty() {
+            String::new()
+        } else {
+            format!(" and {} learning-curve panels", panels.len())
+        },
+        a.smooth
+    );
     Ok(())
+}
+
+/// Fig. 4's learning-curve panels of the runs whose `eval.csv` has them (none for runs of
+/// an mdrlat before the curves): per run (or variant), the unseen world's curve and the
+/// training world's held-out one.
+fn curve_panels(a: &Args) -> Result<Vec<(&'static str, &'static str, Vec<Series>)>> {
+    let mut panels = Vec::new();
+    for (column, title, y) in CURVE_PANELS {
+        let mut series = Vec::new();
+        for dir in &a.runs {
+            let path = dir.join("eval.csv");
+            let (train, unseen) = (format!("train_{column}"), format!("unseen_{column}"));
+            if !has_columns(&path, &[&train, &unseen]) {
+                continue;
+            }
+            let c = read_csv(&path, &["step", &train, &unseen])?;
+            let (label, variant) = run_label(dir);
+            let world = curve_world(dir).unwrap_or_else(|| "unseen".into());
+            for (ys, which) in [(&c[2], world), (&c[1], "train, held-out starts".to_string())] {
+                let keep: Vec<(f32, f32)> = c[0]
+                    .iter()
+                    .copied()
+                    .zip(ys.iter().copied())
+                    .filter(|p| p.1.is_finite())
+                    .collect();
+                if keep.is_empty() {
+                    continue;
+                }
+                let smoothed = smooth(&keep.iter().map(|p| p.1).collect::<Vec<_>>(), a.smooth);
+                series.push((
+                    format!("{variant}: {which}"),
+                    Series {
+                        label: format!("{label}: {which}"),
+                        points: keep.iter().map(|p| p.0).zip(smoothed).collect(),
+                        band: Vec::new(),
+                    },
+                ));
+            }
+        }
+        if series.is_empty() {
+            continue;
+        }
+        let series = if a.by_variant {
+            average_by_variant(series)
+        } else {
+            series.into_iter().map(|(_, s)| s).collect()
+        };
+        panels.push((title, y, series));
+    }
+    Ok(panels)
 }
 
 #[cfg(test)]
