@@ -26,6 +26,12 @@ pub struct SimConfig {
     /// Extra clearance, metres, between the robot footprint and any obstacle or pedestrian
     /// at a reset pose.
     pub spawn_clearance_m: f32,
+    /// More clearance, metres, from what the body can hit but the laser plane misses (low
+    /// boxes, overhangs): neither sensor sees such a thing within reach of a start (the
+    /// laser passes over or under it, the depth camera reads nothing nearer than its minimum
+    /// range and its 45° miss a low box close by), so a start next to one is lost whatever
+    /// the policy does. 0: as mdrlat before 2026-12-06.
+    pub spawn_hidden_clearance_m: f32,
     /// Seconds ahead over which a reset pose must keep that clearance from every
     /// pedestrian's path as well: pedestrians do not avoid the robot, so a start next to
     /// one walking at it would be lost before the policy could act.
@@ -148,6 +154,7 @@ impl Default for SimConfig {
             depth: DepthConfig::default(),
             reward: RewardConfig::default(),
             spawn_clearance_m: mdrlat_core::robot::SPAWN_CLEARANCE_M,
+            spawn_hidden_clearance_m: 0.3,
             spawn_pedestrian_horizon_s: 1.0,
             pedestrian_yield_m: 0.3,
             task: Task::Avoid,
@@ -306,11 +313,12 @@ impl SimConfig {
                 return Err(ConfigError { field, problem: format!("must be positive, got {v}") });
             }
         }
-        let non_negative: [(&'static str, f32); 6] = [
+        let non_negative: [(&'static str, f32); 7] = [
             ("laser.noise_std_m", self.laser.noise_std_m),
             ("depth.min_range_m", self.depth.min_range_m),
             ("depth.noise_std_at_1m", self.depth.noise_std_at_1m),
             ("spawn_clearance_m", self.spawn_clearance_m),
+            ("spawn_hidden_clearance_m", self.spawn_hidden_clearance_m),
             ("spawn_pedestrian_horizon_s", self.spawn_pedestrian_horizon_s),
             ("reward.collision_range_m", self.reward.collision_range_m),
         ];

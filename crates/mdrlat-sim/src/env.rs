@@ -433,7 +433,17 @@ impl Env {
             );
             let yaw = self.rng.range_f32(-std::f32::consts::PI, std::f32::consts::PI);
             let blocked_static =
-                self.scene.body_contact(p, clearance, &mut self.scratch, &mut self.buf).is_some();
+                self.scene.body_contact(p, clearance, &mut self.scratch, &mut self.buf).is_some()
+                    || self
+                        .scene
+                        .hidden_contact(
+                            p,
+                            clearance + self.config.spawn_hidden_clearance_m,
+                            self.config.laser.height_m,
+                            &mut self.scratch,
+                            &mut self.buf,
+                        )
+                        .is_some();
             let blocked_ped =
                 sweep.iter().any(|&(centre, radius)| (centre - p).length() < clearance + radius);
             if !blocked_static && !blocked_ped {

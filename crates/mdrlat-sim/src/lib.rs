@@ -7,6 +7,7 @@
 //! `reset(seed)` is the only way to seed, and `step` reports `terminated` (collision) and
 //! `truncated` (time limit) separately.
 
+pub mod avoid;
 pub mod bench;
 pub mod config;
 pub mod env;
@@ -20,6 +21,7 @@ pub mod scene;
 pub mod sensors;
 pub mod vec_env;
 
+pub use avoid::{AvoidConfig, AvoidPolicy};
 pub use config::SimConfig;
 pub use env::{Collision, Env, EnvState, Observation, SimError, Step, StepInfo};
 pub use episodes::{

@@ -26,17 +26,22 @@ pub enum Scripted {
     /// 300 steps but never gets 2 m from its start: the moving success's reach rule is
     /// what rejects it.
     Circle,
+    /// The classical avoider ([`crate::AvoidPolicy`]): a dynamic-window controller over the
+    /// ten actions on a local costmap of both sensors carried by odometry, with the walkers'
+    /// motion from consecutive scans. The baseline that says how achievable a world is.
+    Avoid,
 }
 
 impl Scripted {
     /// Every scripted policy, in the order of [`Scripted::name`]s listed in errors.
-    pub const ALL: [Scripted; 6] = [
+    pub const ALL: [Scripted; 7] = [
         Scripted::Random,
         Scripted::Forward,
         Scripted::Wander,
         Scripted::WanderLaser,
         Scripted::Spin,
         Scripted::Circle,
+        Scripted::Avoid,
     ];
 
     /// The name used on the command line and in reports.
@@ -48,6 +53,7 @@ impl Scripted {
             Scripted::WanderLaser => "wander-laser",
             Scripted::Spin => "spin",
             Scripted::Circle => "circle",
+            Scripted::Avoid => "avoid",
         }
     }
 
@@ -64,7 +70,7 @@ impl Scripted {
             Scripted::Forward => best(|c| c.w == 0.0, |c| -c.v),
             Scripted::Spin => best(|c| c.v == 0.0 && c.w != 0.0, |c| -c.w.abs()),
             Scripted::Circle => best(|c| c.v > 0.0 && c.w != 0.0, |c| c.v / c.w.abs()),
-            Scripted::Random | Scripted::Wander | Scripted::WanderLaser => None,
+            Scripted::Random | Scripted::Wander | Scripted::WanderLaser | Scripted::Avoid => None,
         }
     }
 
@@ -86,6 +92,9 @@ impl Scripted {
                 config.robot.body_height_m,
             )),
             Scripted::WanderLaser => Box::new(WanderPolicy::new(laser.angles())),
+            Scripted::Avoid => {
+                Box::new(crate::AvoidPolicy::new(config, crate::AvoidConfig::default()))
+            }
         }
     }
 }

@@ -76,7 +76,35 @@ impl StaticScene {
         scratch: &mut GridScratch,
         buf: &mut Vec<u32>,
     ) -> Option<usize> {
+        self.body_contact_where(p, radius, scratch, buf, |_| true)
+    }
+
+    /// The first static prism the body can hit that the laser plane at `laser_z` misses (a
+    /// low box, an overhang) overlapping a disc at `p`, if any: what only the depth camera
+    /// can show, and only from beyond its minimum range.
+    pub fn hidden_contact(
+        &self,
+        p: Vec2,
+        radius: f32,
+        laser_z: f32,
+        scratch: &mut GridScratch,
+        buf: &mut Vec<u32>,
+    ) -> Option<usize> {
+        self.body_contact_where(p, radius, scratch, buf, |prism| !prism.spans_height(laser_z))
+    }
+
+    fn body_contact_where(
+        &self,
+        p: Vec2,
+        radius: f32,
+        scratch: &mut GridScratch,
+        buf: &mut Vec<u32>,
+        keep: impl Fn(&Prism) -> bool,
+    ) -> Option<usize> {
         self.body.query(&Aabb::around(p, radius), scratch, buf);
-        buf.iter().map(|&i| i as usize).find(|&i| self.prisms[i].shape.overlaps_disc(p, radius))
+        buf.iter().map(|&i| i as usize).find(|&i| {
+            let prism = &self.prisms[i];
+            keep(prism) && prism.shape.overlaps_disc(p, radius)
+        })
     }
 }

@@ -506,3 +506,28 @@ fn a_start_pose_outside_the_world_or_not_finite_is_an_error_naming_it() {
         env.reset_with(Some(1), Some(Pose2::new(9.5, 1.5, 0.0))).map(|_| ()).expect_err("outside");
     assert!(e.to_string().contains("x 0 to 9 m, y 0 to 8 m"), "{e}");
 }
+
+/// Issue 38: a start never lies where neither sensor can see what the body would hit first
+/// (a low box within the camera's blind range, under the laser plane). With the hidden
+/// clearance at 0, as before, some `furnished` starts do.
+#[test]
+fn issue_38_no_start_next_to_an_obstacle_the_sensors_cannot_see() {
+    let world = mdrlat_world::builtin::get("furnished").expect("builtin").expect("valid");
+    let scene = StaticScene::new(Arc::new(world.clone()), &SimConfig::default());
+    let near_hidden = |config: SimConfig| -> usize {
+        let mut env = Env::from_world(world.clone(), config.clone()).expect("env");
+        let (mut scratch, mut buf) = (mdrlat_geom::GridScratch::default(), Vec::new());
+        let reach = config.robot.radius_m + config.spawn_clearance_m + 0.3;
+        (0..300u64)
+            .filter(|&seed| {
+                env.reset(Some(seed)).expect("reset");
+                let p = env.pose().position();
+                let hit = scene.hidden_contact(p, reach - 1e-3, 0.4, &mut scratch, &mut buf);
+                hit.is_some()
+            })
+            .count()
+    };
+    assert_eq!(near_hidden(SimConfig::default()), 0);
+    let before = SimConfig { spawn_hidden_clearance_m: 0.0, ..SimConfig::default() };
+    assert!(near_hidden(before) > 0, "the control found no start next to a low box");
+}

@@ -241,14 +241,17 @@ mod tests {
         let next = |attempted: &[String], running: &[&str]| {
             next_job(&plan, attempted, running).map(|j| j.id.clone())
         };
-        // Nothing trained: the baseline (which needs nothing), then training in order.
-        assert_eq!(next(&[], &[]).as_deref(), Some("eval/wander"));
-        let tried = vec!["eval/wander".to_string()];
+        // Nothing trained: the baselines (which need nothing), then training in order.
+        assert_eq!(next(&[], &[]).as_deref(), Some("eval/spin"));
+        let baselines = ["eval/spin", "eval/wander", "eval/avoid"];
+        assert_eq!(next(&["eval/spin".into()], &[]).as_deref(), Some("eval/wander"));
+        let tried: Vec<String> = baselines.iter().map(|b| b.to_string()).collect();
         assert_eq!(next(&tried, &[]).as_deref(), Some("train/laser-only-s0"));
         assert_eq!(next(&tried, &["train/laser-only-s0"]).as_deref(), Some("train/laser-only-s1"));
         // laser-only-s0 trained: its evaluation jumps ahead of depth-only's training.
         plan.mark_done(plan.job("train/laser-only-s0").expect("job")).expect("mark");
-        let tried = vec!["eval/wander".into(), "train/laser-only-s1".into()];
+        let mut tried = tried;
+        tried.push("train/laser-only-s1".into());
         assert_eq!(next(&tried, &[]).as_deref(), Some("eval/laser-only-s0"));
         let _ = std::fs::remove_dir_all(&dir);
     }

@@ -330,8 +330,10 @@ mod tests {
         let sweep = Sweep::preset("paper").expect("paper");
         let plan = Plan::new(sweep, Path::new("/tmp/x"));
         assert_eq!(plan.train_jobs().count(), 30);
-        assert_eq!(plan.eval_jobs().count(), 31);
-        assert_eq!(plan.jobs.len(), 62);
+        // 30 models and the baselines spin, wander and avoid.
+        assert_eq!(plan.eval_jobs().count(), 33);
+        assert_eq!(plan.jobs.len(), 64);
+        assert!(plan.job("eval/avoid").is_ok() && plan.job("eval/spin").is_ok());
         assert_eq!(plan.jobs[0].id, "train/laser-only-s0");
         let e = plan.job("eval/mdrlat-s0").expect("eval");
         assert_eq!(e.needs, ["train/mdrlat-s0"]);
@@ -339,7 +341,7 @@ mod tests {
         let other = plan.job("eval/mdrlat-s1").expect("eval");
         assert!(matches!(other.kind, JobKind::EvalModel { figures: 0, .. }));
         let tables = plan.job("tables").expect("tables");
-        assert_eq!(tables.needs.len(), 31);
+        assert_eq!(tables.needs.len(), 33);
         let e = plan.check_needs(e).expect_err("the model is not trained");
         assert_eq!(e.to_string(), "eval/mdrlat-s0 needs train/mdrlat-s0, which is not finished");
         assert!(plan.check_needs(tables).is_ok(), "the tables say what is missing");

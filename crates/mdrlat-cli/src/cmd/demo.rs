@@ -47,7 +47,7 @@ pub struct Args {
 /// The scripted policies the demo evaluates beside its network: one that games the paper's
 /// success by turning in place, the reactive wanderer, and the classical avoider that says
 /// how achievable the world is.
-const DEMO_BASELINES: [&str; 2] = ["spin", "wander"];
+const DEMO_BASELINES: [&str; 3] = ["spin", "wander", "avoid"];
 
 /// Trains, evaluates and tabulates through a one-variant sweep in `OUT/reproduce`.
 fn pipeline(a: &Args) -> Result<()> {
