@@ -781,7 +781,8 @@ pub fn report(plan: &Plan, t: &Table2) -> String {
         return s;
     }
     let _ = writeln!(s, "\n[Table 2](table2.md) · [CSV](table2.csv) · [Fig. 4](fig4.png)\n");
-    s.push_str(&t.markdown(plan).replacen("# Table 2", "## Table 2", 1));
+    // The table's own sections one level down, under the report's.
+    s.push_str(&t.markdown(plan).replace("\n## ", "\n### ").replacen("# Table 2", "## Table 2", 1));
     for (metric, heading) in [
         (Metric::Moving, "Does the paper's ordering hold here, by moving success?"),
         (Metric::Paper, "Does it hold by the paper's success?"),
@@ -815,7 +816,11 @@ pub fn report(plan: &Plan, t: &Table2) -> String {
          paper's success asks for no collision only, which a policy turning in place meets.\n",
         sw.eval.max_steps, sw.eval.min_path_m, sw.eval.min_reach_m
     );
-    let _ = writeln!(s, "## Figures\n\n![Fig. 4: evaluation reward during training](fig4.png)\n");
+    let _ = writeln!(
+        s,
+        "## Figures\n\n![Fig. 4: evaluation reward during training, and the learning curves (moving \
+         success, success, path) on held-out starts of the training world and in an unseen world](fig4.png)\n"
+    );
     if let Some(fig) = plan
         .eval_jobs()
         .find(|j| matches!(j.kind, JobKind::EvalModel { figures, .. } if figures > 0))
