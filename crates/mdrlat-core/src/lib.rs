@@ -18,7 +18,9 @@ pub use obs::{
     ODOM_HISTORY, Observation, goal_in_robot_frame, laser_beam_angle, normalize_depth,
     normalize_goal, normalize_laser,
 };
-pub use policy::{Policy, PolicyError, Sensors, catch_panic, check_batch, greedy_actions};
+pub use policy::{
+    Policy, PolicyError, Sensors, act_each, catch_panic, check_batch, greedy_actions,
+};
 pub use rng::Rng;
 
 /// Robot constants shared by the simulator and the world checks (turtlebot2 / Kobuki).

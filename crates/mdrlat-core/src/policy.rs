@@ -134,6 +134,24 @@ pub fn check_batch(batch: &[&Observation], slots: &[usize]) -> Result<(), Policy
     Ok(())
 }
 
+/// The loop of every policy that decides observation by observation: checks that each
+/// observation of `batch` comes with its slot, then fills `out` (cleared first) with
+/// `decide(slot, observation)` for each, in order.
+///
+/// # Errors
+/// [`check_batch`]'s.
+pub fn act_each(
+    batch: &[&Observation],
+    slots: &[usize],
+    out: &mut Vec<Action>,
+    mut decide: impl FnMut(usize, &Observation) -> Action,
+) -> Result<(), PolicyError> {
+    check_batch(batch, slots)?;
+    out.clear();
+    out.extend(batch.iter().zip(slots).map(|(obs, &slot)| decide(slot, obs)));
+    Ok(())
+}
+
 /// Runs a decision, turning a panic inside it (a backend's bug) into a
 /// [`PolicyError::Backend`] that names `what` panicked and why: a failed decision the caller
 /// can report (the ROS node stops the robot), not a crash.

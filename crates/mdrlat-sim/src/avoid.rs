@@ -34,7 +34,7 @@ use crate::config::SimConfig;
 use crate::env::Observation;
 use crate::robot::RobotState;
 use crate::sensors::{DepthCamera, DepthGeometry, Laser};
-use mdrlat_core::{Action, ODOM_HISTORY, Policy, PolicyError, Sensors, Velocity, check_batch};
+use mdrlat_core::{Action, ODOM_HISTORY, Policy, PolicyError, Sensors, Velocity, act_each};
 use mdrlat_geom::{Pose2, Vec2};
 use std::collections::BTreeMap;
 
@@ -479,12 +479,6 @@ impl Policy for AvoidPolicy {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
-        check_batch(batch, slots)?;
-        out.clear();
-        for (obs, &slot) in batch.iter().zip(slots) {
-            let a = self.decide(slot, obs);
-            out.push(a);
-        }
-        Ok(())
+        act_each(batch, slots, out, |slot, obs| self.decide(slot, obs))
     }
 }

@@ -4,7 +4,9 @@
 use crate::config::SimConfig;
 use crate::env::Observation;
 use crate::sensors::{DepthCamera, DepthGeometry, Laser};
-use mdrlat_core::{Action, Policy, PolicyError, Rng, Sensors, TABLE_1, Velocity, check_batch};
+use mdrlat_core::{
+    Action, Policy, PolicyError, Rng, Sensors, TABLE_1, Velocity, act_each, check_batch,
+};
 
 /// The scripted policies by name (`mdrlat rollout --policy`, `mdrlat eval --policy`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -161,13 +163,10 @@ impl Policy for RandomPolicy {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
-        check_batch(batch, slots)?;
-        out.clear();
-        for &slot in slots {
+        act_each(batch, slots, out, |slot, _| {
             let a = self.stream(slot).below(Action::COUNT);
-            out.push(Action::new(a).unwrap_or_else(|| unreachable!("below(COUNT)")));
-        }
-        Ok(())
+            Action::new(a).unwrap_or_else(|| unreachable!("below(COUNT)"))
+        })
     }
 }
 
@@ -204,10 +203,7 @@ impl Policy for ConstantPolicy {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
-        check_batch(batch, slots)?;
-        out.clear();
-        out.resize(batch.len(), self.action);
-        Ok(())
+        act_each(batch, slots, out, |_, _| self.action)
     }
 }
 
@@ -371,12 +367,6 @@ impl Policy for WanderPolicy {
         slots: &[usize],
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
-        check_batch(batch, slots)?;
-        out.clear();
-        for obs in batch {
-            let a = self.decide(obs);
-            out.push(a);
-        }
-        Ok(())
+        act_each(batch, slots, out, |_, obs| self.decide(obs))
     }
 }
