@@ -25,6 +25,29 @@ impl Config {
         Self::resolve(Some(path), &[])
     }
 
+    /// A run's resolved `config.toml`, as the version that wrote it meant it: a run writes
+    /// every setting, so a key it lacks is one added since, and it gets the value that
+    /// reproduces the simulator the run started in (walkers that ignore the robot, starts
+    /// without the hidden-obstacle clearance), never today's default. A resumed run goes on
+    /// in the world it began in.
+    pub fn load_run(path: &Path) -> Result<Config> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read config {}", path.display()))?;
+        let mut tree: toml::Table = toml::from_str(&text)
+            .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
+        if let Some(sim) = tree.get_mut("sim").and_then(toml::Value::as_table_mut) {
+            for (key, before) in LEGACY_SIM {
+                sim.entry(key).or_insert(toml::Value::Float(before));
+            }
+        }
+        let config: Config = tree.try_into().map_err(|e: toml::de::Error| {
+            anyhow::anyhow!("{}: {}", path.display(), e.to_string().trim_end())
+        })?;
+        config.sim.validate().with_context(|| path.display().to_string())?;
+        config.train.validate().with_context(|| path.display().to_string())?;
+        Ok(config)
+    }
+
     /// The default config, or the one in `path` when given.
     pub fn load_or_default(path: Option<&Path>) -> Result<Config> {
         Self::resolve(path, &[])
@@ -56,6 +79,11 @@ impl Config {
         Ok(config)
     }
 }
+
+/// Simulator settings added after runs were first written, with the value that gives the
+/// simulator as it was before them (see [`Config::load_run`]).
+const LEGACY_SIM: [(&str, f64); 2] =
+    [("pedestrian_yield_m", -1.0), ("spawn_hidden_clearance_m", 0.0)];
 
 /// Applies one `dotted.key=value` override to a TOML tree.
 fn apply_set(tree: &mut toml::Table, set: &str) -> Result<()> {
@@ -109,6 +137,32 @@ mod tests {
         assert!(format!("{e:#}").contains("train.batch_size"), "{e:#}");
         let e = Config::resolve(None, &["train.variant=mdrlat2".to_string()]).expect_err("variant");
         assert!(format!("{e:#}").contains("mdrlat2"), "{e:#}");
+    }
+
+    #[test]
+    fn a_run_written_before_a_setting_existed_resumes_in_its_old_simulator() {
+        let dir = std::env::temp_dir().join(format!("mdrlat-load-run-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("config.toml");
+        // Today's run: every key written, kept as it is.
+        std::fs::write(&path, toml::to_string(&Config::default()).expect("toml")).expect("write");
+        assert_eq!(Config::load_run(&path).expect("loads"), Config::default());
+        // A run of an older mdrlat: its config lacks the walkers' yield and the hidden
+        // clearance, which resume as they were (walkers ignore the robot, no clearance).
+        let mut old: toml::Table =
+            toml::from_str(&toml::to_string(&Config::default()).expect("toml")).expect("tree");
+        let sim = old.get_mut("sim").and_then(toml::Value::as_table_mut).expect("sim");
+        sim.remove("pedestrian_yield_m");
+        sim.remove("spawn_hidden_clearance_m");
+        std::fs::write(&path, toml::to_string(&old).expect("toml")).expect("write");
+        let c = Config::load_run(&path).expect("loads");
+        assert_eq!((c.sim.pedestrian_yield_m, c.sim.spawn_hidden_clearance_m), (-1.0, 0.0));
+        assert_eq!(
+            Config::load(&path).expect("loads").sim.pedestrian_yield_m,
+            0.3,
+            "plain loads take today's defaults"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -56,7 +56,7 @@ pub fn episode_row(r: &EpisodeRecord, rule: &MovingRule) -> String {
 }
 
 /// Mean and population std (as `numpy.std`) of per-run rates.
-fn mean_std(per_run: &[f64]) -> (f64, f64) {
+pub fn mean_std(per_run: &[f64]) -> (f64, f64) {
     let n = per_run.len().max(1) as f64;
     let mean = per_run.iter().sum::<f64>() / n;
     (mean, (per_run.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt())

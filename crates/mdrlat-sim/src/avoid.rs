@@ -9,19 +9,21 @@
 //!    previous odometry reading (the same acceleration limits and sub-steps the base obeys).
 //! 2. **A local costmap carried by odometry.** The laser's hits and the depth camera's
 //!    obstacle columns (heights between 3 cm and the body's, floor excluded) mark 5 cm cells
-//!    in the odometry frame, each remembering which sensor saw it and when. A cell that a
-//!    sensor now sees through is cleared (raytrace clearing, each sensor its own cells, so
-//!    a low box under the laser plane is not wiped by the laser); cells unseen for
+//!    in the odometry frame, each remembering which sensors saw it and when. A cell that a
+//!    sensor that saw it now sees through is cleared (raytrace clearing: a low box under the
+//!    laser plane is not wiped by the laser, and the camera clears only where its rows cover
+//!    every height the body can hit); cells unseen for
 //!    [`AvoidConfig::memory_steps`] or far away are forgotten. The memory is what lets the
 //!    robot turn beside a box that has left the camera's 58° or come inside its 0.4 m
 //!    minimum range.
-//! 3. **Walkers.** Laser cells that appeared where the previous scan saw free space, next to
-//!    cells that vanished, are matched into moving points with a velocity, and each
-//!    roll-out meets them where they will be.
+//! 3. **Walkers.** A laser hit where the previous scan saw free space, with a hit of the
+//!    previous scan within a walker's step of it, is a moving point with that velocity, and
+//!    each roll-out meets it where it will be.
 //! 4. **Roll-outs.** Each action is held for [`AvoidConfig::horizon_s`] through the
 //!    kinematics (acceleration limits included); one whose body disc comes within
-//!    [`AvoidConfig::margin_m`] of a remembered or predicted point is refused. Turning in
-//!    place is refused only when the robot is already touching.
+//!    [`AvoidConfig::margin_m`] of a remembered or predicted point is refused — except
+//!    turning in place where the robot already stands that close, as long as the turn brings
+//!    it no closer than it is.
 //! 5. **Score.** Speed, clearance, how open the way ahead of the roll-out's end is, progress
 //!    away from the episode's start (so it explores rather than circles), and a preference
 //!    for the turn direction it already took (no dithering at a wall). If every action is
@@ -65,6 +67,41 @@ pub struct AvoidConfig {
     pub unknown_weight: f32,
 }
 
+impl AvoidConfig {
+    /// Checks every setting (positive sizes and times, speeds in order).
+    ///
+    /// # Errors
+    /// The first bad setting, named.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = [
+            ("cell_m", self.cell_m),
+            ("memory_radius_m", self.memory_radius_m),
+            ("horizon_s", self.horizon_s),
+            ("rollout_dt_s", self.rollout_dt_s),
+            ("lookahead_m", self.lookahead_m),
+            ("walker_max_speed", self.walker_max_speed),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("avoid.{name}: must be positive, got {v}"));
+            }
+        }
+        for (name, v) in [
+            ("margin_m", self.margin_m),
+            ("walker_min_speed", self.walker_min_speed),
+            ("unknown_weight", self.unknown_weight),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("avoid.{name}: must be >= 0, got {v}"));
+            }
+        }
+        if self.horizon_s / self.rollout_dt_s > 1000.0 || self.cell_m < 0.005 {
+            return Err("avoid: more than 1000 roll-out points or cells under 5 mm".into());
+        }
+        Ok(())
+    }
+}
+
 impl Default for AvoidConfig {
     fn default() -> Self {
         Self {
@@ -82,19 +119,15 @@ impl Default for AvoidConfig {
     }
 }
 
-/// Which sensor marked a cell (each clears only its own).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Source {
-    Laser,
-    Depth,
-}
-
 /// A remembered costmap cell.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Cell {
     /// The step a sensor last saw it.
     seen: u32,
-    source: Source,
+    /// The laser hit it: it reaches the laser plane, and the laser seeing through it clears it.
+    laser: bool,
+    /// The depth camera saw it: the camera seeing through it clears it too.
+    depth: bool,
 }
 
 /// One slot's memory: its odometry pose, its costmap and the walkers of its last scan.
@@ -113,6 +146,9 @@ struct Slot {
     known_free: std::collections::HashMap<(i32, i32), u32>,
     /// The laser's hits of the previous step, odometry frame.
     last_hits: Vec<Vec2>,
+    /// The previous step's laser ranges and the pose they were taken from.
+    last_scan: Vec<f32>,
+    last_pose: Pose2,
     /// Moving points found at the last step: position and velocity, odometry frame.
     walkers: Vec<(Vec2, Vec2)>,
     /// The turn direction taken last (−1, 0, +1).
@@ -143,7 +179,11 @@ pub struct AvoidPolicy {
 
 impl AvoidPolicy {
     /// The avoider for environments with `sim`'s sensors and robot.
-    pub fn new(sim: &SimConfig, config: AvoidConfig) -> Self {
+    ///
+    /// # Errors
+    /// A setting [`AvoidConfig::validate`] refuses.
+    pub fn new(sim: &SimConfig, config: AvoidConfig) -> Result<Self, String> {
+        config.validate()?;
         let laser = Laser::new(&sim.laser);
         let depth = DepthCamera::new(&sim.depth).geometry();
         let (y_top, y_bottom) = depth
@@ -154,7 +194,7 @@ impl AvoidPolicy {
         let near_z = ((h - 0.03) / y_bottom.max(1e-3))
             .max((sim.robot.body_height_m - h) / (-y_top).max(1e-3))
             .max(sim.depth.min_range_m);
-        Self {
+        Ok(Self {
             near_z,
             start_clear_m: sim.robot.radius_m
                 + sim.spawn_clearance_m
@@ -169,7 +209,7 @@ impl AvoidPolicy {
             substeps: sim.substeps.max(1),
             slots: Vec::new(),
             depth_ranges: Vec::new(),
-        }
+        })
     }
 
     fn slot(&mut self, slot: usize) -> &mut Slot {
@@ -209,10 +249,18 @@ impl AvoidPolicy {
             self.advance(&mut state, s.last_command);
             s.pose = state.pose;
         }
+        // The laser's hits in the robot frame (beams that returned within range).
+        let laser = obs.laser.latest();
+        let hits: Vec<Vec2> = laser
+            .iter()
+            .zip(&self.beam_angles)
+            .filter(|(r, _)| **r > 0.0 && **r < self.max_range_m - 0.01)
+            .map(|(&r, &a)| Vec2::new(r * a.cos(), r * a.sin()))
+            .collect();
         // 2. The costmap: clear what the sensors see through, mark what they hit.
-        self.update_costmap(&mut s, obs.laser.latest(), obs.depth.latest(), &depth_ranges);
+        self.update_costmap(&mut s, laser, &hits, obs.depth.latest(), &depth_ranges);
         // 3. Walkers: the moving points of this scan.
-        self.track_walkers(&mut s, obs.laser.latest());
+        self.track_walkers(&mut s, laser, &hits);
         // 4.–5. Roll out and score every action.
         let velocity = obs.odom[ODOM_HISTORY - 1];
         let action = self.choose(&s, velocity);
@@ -231,6 +279,7 @@ impl AvoidPolicy {
         &self,
         s: &mut Slot,
         laser: &[f32],
+        hits: &[Vec2],
         depth_latest: &[f32],
         depth_ranges: &[f32],
     ) {
@@ -238,15 +287,12 @@ impl AvoidPolicy {
         let pose = s.pose;
         let step = s.step;
         let n = self.beam_angles.len();
-        let (a0, a1) = (self.beam_angles[0], self.beam_angles[n - 1]);
-        let da = (a1 - a0) / (n - 1).max(1) as f32;
+        let (a0, da) = (self.beam_angles[0], self.beam_step());
         let tan0 = self.depth.column_angles[0].tan();
         let cols = self.depth.column_angles.len();
         let dtan = (self.depth.column_angles[cols - 1].tan() - tan0) / (cols - 1).max(1) as f32;
-        // Nearer than this the camera's 45° does not see both the floor-level 3 cm and the
-        // body's height at the cell, so it cannot tell that the cell is free.
-        let min_depth = 0.7;
         let clear_slack = 1.5 * c.cell_m;
+        let bottom = &depth_latest[depth_latest.len() - cols..];
         let centres: Vec<((i32, i32), Vec2)> =
             s.cells.keys().map(|&k| (k, self.centre(k))).collect();
         for (key, centre) in centres {
@@ -254,40 +300,45 @@ impl AvoidPolicy {
             let (r, a) = (local.length(), local.y.atan2(local.x));
             let Some(cell) = s.cells.get(&key).copied() else { continue };
             let stale = step.saturating_sub(cell.seen) > c.memory_steps || r > c.memory_radius_m;
-            let seen_through = match cell.source {
-                Source::Laser => {
-                    let i = ((a - a0) / da).round();
-                    (0.0..n as f32).contains(&i) && r + clear_slack < laser[i as usize]
-                }
-                Source::Depth => {
-                    let k = ((a.tan() - tan0) / dtan).round();
-                    a.abs() < std::f32::consts::FRAC_PI_2
-                        && (0.0..cols as f32).contains(&k)
-                        && r > min_depth
-                        && r + clear_slack < depth_ranges[k as usize]
+            // Each sensor clears only what it can see: the laser what it hit (a low box under
+            // its plane stays until the camera sees through it), the camera only where its
+            // rows cover every height the body can hit (nearer, a low box hides under its
+            // view) and only in a column whose floor it sees (not hidden by something nearer
+            // than its minimum range).
+            let laser_through = cell.laser && {
+                let i = ((a - a0) / da).round();
+                (0.0..n as f32).contains(&i) && r + clear_slack < laser[i as usize]
+            };
+            let depth_through = cell.depth && a.abs() < std::f32::consts::FRAC_PI_2 && {
+                let k = ((a.tan() - tan0) / dtan).round();
+                (0.0..cols as f32).contains(&k) && {
+                    let k = k as usize;
+                    bottom[k] > 0.0
+                        && r > self.near_z * self.depth.column_k[k]
+                        && r + clear_slack < depth_ranges[k]
                 }
             };
+            let seen_through = laser_through || depth_through;
             if stale || seen_through {
                 s.cells.remove(&key);
             }
         }
-        let mark = |cells: &mut BTreeMap<(i32, i32), Cell>, p: Vec2, source: Source| {
+        let mark = |cells: &mut BTreeMap<(i32, i32), Cell>, p: Vec2, by_laser: bool| {
             let key = self.cell_of(pose.to_world(p));
-            let cell = cells.entry(key).or_insert(Cell { seen: step, source });
+            let cell = cells.entry(key).or_insert(Cell { seen: step, laser: false, depth: false });
             cell.seen = step;
-            // A cell both sensors see is the laser's to clear only if the laser saw it.
-            if source == Source::Depth && cell.source == Source::Laser {
-                cell.source = Source::Depth;
+            if by_laser {
+                cell.laser = true;
+            } else {
+                cell.depth = true;
             }
         };
-        for (&r, &a) in laser.iter().zip(&self.beam_angles) {
-            if r > 0.0 && r < self.max_range_m - 0.01 {
-                mark(&mut s.cells, Vec2::new(r * a.cos(), r * a.sin()), Source::Laser);
-            }
+        for &p in hits {
+            mark(&mut s.cells, p, true);
         }
         for (&r, &a) in depth_ranges.iter().zip(&self.depth.column_angles) {
             if r.is_finite() {
-                mark(&mut s.cells, Vec2::new(r * a.cos(), r * a.sin()), Source::Depth);
+                mark(&mut s.cells, Vec2::new(r * a.cos(), r * a.sin()), false);
             }
         }
         // Known free: the robot's own footprint, and each column the camera sees the floor
@@ -304,7 +355,6 @@ impl AvoidPolicy {
                 }
             }
         }
-        let bottom = &depth_latest[depth_latest.len() - cols..];
         for (col, ((&r, &a), &k)) in
             depth_ranges.iter().zip(&self.depth.column_angles).zip(&self.depth.column_k).enumerate()
         {
@@ -322,32 +372,48 @@ impl AvoidPolicy {
         s.known_free.retain(|_, seen| step.saturating_sub(*seen) <= c.memory_steps);
     }
 
-    /// Matches this scan's hits against the last scan's: a hit with no old hit near it, but
-    /// one within a walker's reach, is a moving point.
-    fn track_walkers(&self, s: &mut Slot, laser: &[f32]) {
+    /// Matches this scan's hits against the last scan's: a hit where the last scan saw free
+    /// space, with an old hit within a walker's step of it, is a moving point whose velocity
+    /// is the difference (static surfaces were not free before; newly revealed ones have no
+    /// old hit near).
+    fn track_walkers(&self, s: &mut Slot, laser: &[f32], hits: &[Vec2]) {
         let c = &self.config;
-        let hits: Vec<Vec2> = laser
-            .iter()
-            .zip(&self.beam_angles)
-            .filter(|(r, _)| **r > 0.0 && **r < self.max_range_m - 0.01)
-            .map(|(&r, &a)| s.pose.to_world(Vec2::new(r * a.cos(), r * a.sin())))
-            .collect();
+        let n = self.beam_angles.len();
+        let (a0, da) = (self.beam_angles[0], self.beam_step());
+        let world: Vec<Vec2> = hits.iter().map(|&p| s.pose.to_world(p)).collect();
         s.walkers.clear();
-        if s.step > 0 {
+        if s.step > 0 && !s.last_scan.is_empty() {
             let still = c.walker_min_speed * self.dt_s;
             let reach = c.walker_max_speed * self.dt_s;
-            for &p in hits.iter().step_by(2) {
+            for &p in world.iter().step_by(2) {
+                // Was this spot free in the last scan?
+                let q = s.last_pose.to_local(p);
+                let i = ((q.y.atan2(q.x) - a0) / da).round();
+                let was_free =
+                    (0.0..n as f32).contains(&i) && s.last_scan[i as usize] > q.length() + 0.15;
+                if !was_free {
+                    continue;
+                }
                 let nearest = s
                     .last_hits
                     .iter()
-                    .map(|&q| (q, (q - p).length()))
+                    .map(|&o| (o, (o - p).length()))
                     .fold((p, f32::INFINITY), |b, x| if x.1 < b.1 { x } else { b });
                 if nearest.1 > still && nearest.1 < reach {
                     s.walkers.push((p, (p - nearest.0) * (1.0 / self.dt_s)));
                 }
             }
         }
-        s.last_hits = hits;
+        s.last_hits = world;
+        s.last_pose = s.pose;
+        s.last_scan.clear();
+        s.last_scan.extend_from_slice(laser);
+    }
+
+    /// Angle between neighbouring laser beams.
+    fn beam_step(&self) -> f32 {
+        let n = self.beam_angles.len();
+        (self.beam_angles[n - 1] - self.beam_angles[0]) / (n - 1).max(1) as f32
     }
 
     /// Rolls out every action from `velocity` and picks the best admissible one.
@@ -370,7 +436,7 @@ impl AvoidPolicy {
             .walkers
             .iter()
             .map(|&(p, v)| (s.pose.to_local(p), rot(v)))
-            .filter(|(p, _)| p.length() < reach)
+            .filter(|&(p, v)| p.length().min((p + v * c.horizon_s).length()) < reach)
             .collect();
         let nearest = |p: Vec2, t: f32| -> f32 {
             let still = points.iter().map(|&q| (q - p).length_sq()).fold(f32::INFINITY, f32::min);
@@ -480,5 +546,22 @@ impl Policy for AvoidPolicy {
         out: &mut Vec<Action>,
     ) -> Result<(), PolicyError> {
         act_each(batch, slots, out, |slot, obs| self.decide(slot, obs))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_settings_are_refused_by_name() {
+        assert!(AvoidConfig::default().validate().is_ok());
+        let bad = |c: AvoidConfig| AvoidPolicy::new(&SimConfig::default(), c).expect_err("bad");
+        assert!(
+            bad(AvoidConfig { rollout_dt_s: 0.0, ..AvoidConfig::default() })
+                .contains("rollout_dt_s")
+        );
+        assert!(bad(AvoidConfig { cell_m: f32::NAN, ..AvoidConfig::default() }).contains("cell_m"));
+        assert!(bad(AvoidConfig { margin_m: -0.1, ..AvoidConfig::default() }).contains("margin_m"));
     }
 }

@@ -33,8 +33,8 @@ pub struct SimConfig {
     /// the policy does. 0: as mdrlat before 2026-12-06.
     pub spawn_hidden_clearance_m: f32,
     /// Seconds ahead over which a reset pose must keep that clearance from every
-    /// pedestrian's path as well: pedestrians do not avoid the robot, so a start next to
-    /// one walking at it would be lost before the policy could act.
+    /// pedestrian's path as well: a start in the way of a walker that ignores the robot
+    /// (`pedestrian_yield_m` < 0) would be lost before the policy could act.
     pub spawn_pedestrian_horizon_s: f32,
     /// Walkers yield to the robot: none steps closer than this to the robot's footprint,
     /// metres; a walker blocked by it waits, then turns back, as it does for another walker.

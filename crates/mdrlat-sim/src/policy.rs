@@ -94,9 +94,10 @@ impl Scripted {
                 config.robot.body_height_m,
             )),
             Scripted::WanderLaser => Box::new(WanderPolicy::new(laser.angles())),
-            Scripted::Avoid => {
-                Box::new(crate::AvoidPolicy::new(config, crate::AvoidConfig::default()))
-            }
+            Scripted::Avoid => Box::new(
+                crate::AvoidPolicy::new(config, crate::AvoidConfig::default())
+                    .unwrap_or_else(|e| unreachable!("the default settings are valid: {e}")),
+            ),
         }
     }
 }

@@ -48,6 +48,13 @@ pub fn commands(plan: &Plan, job: &Job, threads: usize) -> Result<Vec<Vec<String
                     argv.push("--set".into());
                     argv.push(set.clone());
                 }
+                // The learning curves count moving success as the sweep's table does.
+                for (key, value) in [
+                    ("curve_min_path_m", s.eval.min_path_m),
+                    ("curve_min_reach_m", s.eval.min_reach_m),
+                ] {
+                    argv.extend(["--set".into(), format!("train.{key}={value:?}")]);
+                }
                 vec![argv]
             }
         }

@@ -188,10 +188,8 @@ impl Cell {
         if per_run.is_empty() || !self.missing.is_empty() {
             return None;
         }
-        let n = per_run.len() as f64;
-        let mean = per_run.iter().sum::<f64>() / n;
-        let var = per_run.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
-        Some((100.0 * mean, 100.0 * var.sqrt()))
+        let (mean, std) = mdrlat_eval::report::mean_std(per_run);
+        Some((100.0 * mean, 100.0 * std))
     }
 }
 
@@ -443,7 +441,7 @@ paper_std_pct,path_m_mean,min_path_m,min_reach_m,missing\n",
                 "{protocol} **Moving success** = no collision in {} steps *and* at least {} m \
                  driven *and* at least {} m from the start at some step. **Success** = the \
                  paper's measure, no collision in {} steps: a policy that turns in place meets \
-                 it (`spin` scores 100 %), so it is shown second. The paper's numbers (Song et \
+                 it, so it is shown second. The paper's numbers (Song et \
                  al. 2021, Table 2: 400,000 steps, 5 runs of 50 episodes) are comparable with \
                  it alone.\n",
                 sw.eval.max_steps, sw.eval.min_path_m, sw.eval.min_reach_m, sw.eval.max_steps

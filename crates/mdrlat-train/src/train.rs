@@ -128,7 +128,8 @@ pub struct Evaluation {
 pub struct CurvePoint {
     /// The world.
     pub world: String,
-    /// Moving success rate (no collision, at least 5 m driven and 2 m from the start).
+    /// Moving success rate (no collision, at least `train.curve_min_path_m` driven and
+    /// `train.curve_min_reach_m` from the start).
     pub moving_success: f64,
     /// The paper's success rate (no collision within 300 steps).
     pub success: f64,
@@ -294,6 +295,7 @@ pub fn evaluate(
         seed: config.eval_seed,
         envs: (config.curve_episodes as usize).clamp(1, 64),
         sim_threads: 1,
+        moving: config.curve_rule(),
         ..mdrlat_eval::EvalSettings::default()
     };
     let mut curves = Vec::with_capacity(curve_worlds.len());
@@ -330,11 +332,19 @@ fn reopen(path: PathBuf, header: &str, step: u64, keep_step: bool) -> Result<Csv
     let io = |source| TrainError::Io { path: path.clone(), source };
     let text = std::fs::read_to_string(&path).map_err(io)?;
     let old_header = text.lines().next().unwrap_or_default();
-    let missing = if old_header != header && header.starts_with(old_header) {
-        header.split(',').count() - old_header.split(',').count()
-    } else {
-        0
-    };
+    let (old_fields, fields): (Vec<&str>, Vec<&str>) =
+        (old_header.split(',').collect(), header.split(',').collect());
+    // The same columns, or the first columns of today's (an older version's file).
+    if old_fields.len() > fields.len() || fields[..old_fields.len()] != old_fields[..] {
+        return Err(TrainError::Checkpoint {
+            path: path.clone(),
+            problem: format!(
+                "its header '{old_header}' is not this version's '{header}' nor its first \
+                 columns: written by another mdrlat; resume it with that one"
+            ),
+        });
+    }
+    let missing = fields.len() - old_fields.len();
     let mut kept = String::with_capacity(text.len());
     for (i, line) in text.lines().enumerate() {
         if i == 0 {
@@ -693,6 +703,11 @@ mod tests {
         let mut csv = reopen(path.clone(), EVAL_HEADER, 20_000, true).expect("reopen");
         csv.flush().expect("flush");
         assert_eq!(std::fs::read_to_string(&path).expect("read"), text);
+        // One whose columns are not this version's (a newer one's) is an error, not a mix.
+        std::fs::write(&path, format!("{EVAL_HEADER},future_column\n5000{}\n", ",1".repeat(12)))
+            .expect("write");
+        let e = reopen(path.clone(), EVAL_HEADER, 5000, true).map(|_| ()).expect_err("newer");
+        assert!(e.to_string().contains("future_column"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

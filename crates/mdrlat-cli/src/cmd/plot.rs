@@ -62,13 +62,20 @@ fn average_by_variant(series: Vec<(String, Series)>) -> Vec<Series> {
                 one.label = variant;
                 return one;
             }
-            let len = runs.iter().map(|r| r.points.len()).min().unwrap_or(0);
+            // The steps every run has (runs resumed from older versions or evaluated at other
+            // intervals may lack some), each averaged over the runs at that step.
+            let at = |r: &Series, x: f32| r.points.iter().find(|p| p.0 == x).map(|p| p.1);
+            let common: Vec<f32> = runs[0]
+                .points
+                .iter()
+                .map(|p| p.0)
+                .filter(|&x| runs.iter().all(|r| at(r, x).is_some()))
+                .collect();
             let n = runs.len() as f32;
-            let mut points = Vec::with_capacity(len);
-            let mut band = Vec::with_capacity(len);
-            for i in 0..len {
-                let x = runs[0].points[i].0;
-                let ys: Vec<f32> = runs.iter().map(|r| r.points[i].1).collect();
+            let mut points = Vec::with_capacity(common.len());
+            let mut band = Vec::with_capacity(common.len());
+            for x in common {
+                let ys: Vec<f32> = runs.iter().filter_map(|r| at(r, x)).collect();
                 let mean = ys.iter().sum::<f32>() / n;
                 let std = (ys.iter().map(|y| (y - mean).powi(2)).sum::<f32>() / n).sqrt();
                 points.push((x, mean));
@@ -80,13 +87,9 @@ fn average_by_variant(series: Vec<(String, Series)>) -> Vec<Series> {
 }
 
 /// The learning curves' panels of Fig. 4: (`eval.csv` column after `train_`/`unseen_`,
-/// title, y label).
+/// title, y label); the moving success's title gets the first run's thresholds.
 const CURVE_PANELS: [(&str, &str, &str); 3] = [
-    (
-        "moving_success",
-        "Moving success (no collision in 300 steps, >= 5 m driven, >= 2 m from the start)",
-        "rate",
-    ),
+    ("moving_success", "Moving success", "rate"),
     ("success", "Success, the paper's measure (no collision in 300 steps)", "rate"),
     ("path_m", "Mean collision-free path per episode", "metres"),
 ];
@@ -99,10 +102,11 @@ fn has_columns(path: &Path, columns: &[&str]) -> bool {
     })
 }
 
-/// The unseen world of a run's learning curves, from its `config.toml`.
-fn curve_world(dir: &Path) -> Option<String> {
-    let config = crate::config::Config::load_or_default(Some(&dir.join("config.toml"))).ok()?;
-    config.train.curve_world_for(config.sim.task)
+/// The unseen world of a run's learning curves and their moving rule, from its
+/// `config.toml`.
+fn curve_settings(dir: &Path) -> Option<(Option<String>, mdrlat_sim::MovingRule)> {
+    let config = crate::config::Config::load_run(&dir.join("config.toml")).ok()?;
+    Some((config.train.curve_world_for(config.sim.task), config.train.curve_rule()))
 }
 
 /// Rows of a CSV file as (column name → values); empty cells are NaN.
@@ -284,9 +288,18 @@ pub fn run(a: &Args) -> Result<()> {
 /// Fig. 4's learning-curve panels of the runs whose `eval.csv` has them (none for runs of
 /// an mdrlat before the curves): per run (or variant), the unseen world's curve and the
 /// training world's held-out one.
-fn curve_panels(a: &Args) -> Result<Vec<(&'static str, &'static str, Vec<Series>)>> {
+fn curve_panels(a: &Args) -> Result<Vec<(String, &'static str, Vec<Series>)>> {
     let mut panels = Vec::new();
+    let rule = a.runs.iter().find_map(|d| curve_settings(d)).map_or_else(Default::default, |s| s.1);
     for (column, title, y) in CURVE_PANELS {
+        let title = if column == "moving_success" {
+            format!(
+                "{title} (no collision in 300 steps, >= {} m driven, >= {} m from the start)",
+                rule.min_path_m, rule.min_reach_m
+            )
+        } else {
+            title.to_string()
+        };
         let mut series = Vec::new();
         for dir in &a.runs {
             let path = dir.join("eval.csv");
@@ -296,7 +309,7 @@ fn curve_panels(a: &Args) -> Result<Vec<(&'static str, &'static str, Vec<Series>
             }
             let c = read_csv(&path, &["step", &train, &unseen])?;
             let (label, variant) = run_label(dir);
-            let world = curve_world(dir).unwrap_or_else(|| "unseen".into());
+            let world = curve_settings(dir).and_then(|s| s.0).unwrap_or_else(|| "unseen".into());
             for (ys, which) in [(&c[2], world), (&c[1], "train, held-out starts".to_string())] {
                 let keep: Vec<(f32, f32)> = c[0]
                     .iter()
@@ -352,6 +365,17 @@ mod tests {
         assert_eq!(curves[0].points, [(0.0, 2.0), (1.0, 4.0)], "common steps only");
         assert_eq!(curves[0].band, [(0.0, 1.0, 3.0), (1.0, 3.0, 5.0)]);
         assert_eq!(curves[1].label, "multi");
+        // Runs with other steps are averaged step by step, not point by point.
+        let at = |pts: &[(f32, f32)]| Series {
+            label: String::new(),
+            points: pts.to_vec(),
+            band: Vec::new(),
+        };
+        let curves = average_by_variant(vec![
+            ("a".into(), at(&[(5.0, 1.0), (10.0, 3.0)])),
+            ("a".into(), at(&[(10.0, 5.0), (15.0, 7.0)])),
+        ]);
+        assert_eq!(curves[0].points, [(10.0, 4.0)]);
     }
 
     #[test]

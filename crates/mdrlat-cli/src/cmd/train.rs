@@ -128,7 +128,7 @@ fn write_config(dir: &Path, config: &Config) -> Result<()> {
 pub fn run(a: &Args) -> Result<()> {
     let (dir, config, info, resume) = match &a.resume {
         Some(dir) => {
-            let mut config = Config::load(&dir.join("config.toml"))?;
+            let mut config = Config::load_run(&dir.join("config.toml"))?;
             let path = dir.join("run.toml");
             let text = std::fs::read_to_string(&path)
                 .with_context(|| format!("cannot read {}", path.display()))?;
