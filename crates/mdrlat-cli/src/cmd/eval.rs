@@ -31,10 +31,11 @@ pub struct Args {
     /// A run directory of `mdrlat train` (or its checkpoint folder): its network acts greedily.
     #[arg(long, value_name = "RUN_DIR", conflicts_with = "policy")]
     checkpoint: Option<PathBuf>,
-    /// A policy that needs no training instead: random, forward, wander or wander-laser
-    /// (`wander` is the non-learned baseline row beside the six methods); with `--task nav`,
-    /// `planner` (the paper's move_base: A* on a laser-plane map of the world + DWA) or
-    /// `planner-body` (its map holds everything the body can hit).
+    /// A policy that needs no training instead: random, forward, wander, wander-laser, spin,
+    /// circle or avoid (`wander` and the classical `avoid` are the non-learned baseline rows
+    /// beside the six methods; `spin` and `circle` game the paper's success, never the moving
+    /// one); with `--task nav`, `planner` (the paper's move_base: A* on a laser-plane map of
+    /// the world + DWA) or `planner-body` (its map holds everything the body can hit).
     #[arg(long, value_parser = super::parse_policy)]
     policy: Option<PolicyArg>,
     /// World to evaluate in (repeatable): a built-in name, a .toml world file or a
