@@ -114,6 +114,21 @@ pub struct WorldSummary {
     /// `summary.csv` (`navigation.csv` has the rest), in the JSON only when true.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub navigation: bool,
+    /// Share of the decisions that took each Table 1 action (0–1, action 0 first): a
+    /// policy that turns in place shows it at once. In `summary.md` and the JSON, not in
+    /// `summary.csv` (empty when read back from one).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub action_shares: Vec<f64>,
+}
+
+/// The share of all decisions of `w` that took each action.
+fn action_shares(w: &WorldEval) -> Vec<f64> {
+    let mut counts = [0u64; mdrlat_core::Action::COUNT];
+    for a in w.records.iter().flat_map(|r| &r.actions) {
+        counts[a.index()] += 1;
+    }
+    let total = counts.iter().sum::<u64>().max(1) as f64;
+    counts.iter().map(|&c| round(c as f64 / total, 4)).collect()
 }
 
 /// Rounds to `digits` decimals, so that the JSON and CSV outputs agree.
@@ -171,6 +186,7 @@ impl WorldSummary {
             reach_m_mean: round(avg(|r| f64::from(r.reach_m)), 3),
             return_mean: round(avg(|r| f64::from(r.ret)), 4),
             navigation: w.records.iter().any(|r| r.goal.is_some()),
+            action_shares: action_shares(w),
         }
     }
 
@@ -361,6 +377,7 @@ pub fn parse_summary_csv(text: &str, source: &str) -> Result<Vec<WorldSummary>, 
             reach_m_mean: num(19, "reach_m_mean")?,
             return_mean: num(20, "return_mean")?,
             navigation: false,
+            action_shares: Vec::new(),
         });
     }
     Ok(rows)
@@ -427,6 +444,29 @@ pub fn summary_markdown(rows: &[WorldSummary]) -> String {
             r.return_mean
         );
     }
+    if rows.iter().any(|r| !r.action_shares.is_empty()) {
+        let _ = writeln!(
+            s,
+            "\nActions taken, % of decisions (Table 1: 0–2 at 0.5 m/s, 3–7 at 0.2 m/s, 8–9 turning \
+             in place):\n"
+        );
+        let method = if several { "| method " } else { "" };
+        let _ = write!(s, "{method}| world |");
+        for a in 0..mdrlat_core::Action::COUNT {
+            let _ = write!(s, " {a} |");
+        }
+        let _ =
+            writeln!(s, "\n{}| --- |{}", if several { "| --- " } else { "" }, " --- |".repeat(10));
+        for r in rows.iter().filter(|r| !r.action_shares.is_empty()) {
+            let method =
+                if several { format!("| {} ", r.eval.replace('|', "\\|")) } else { String::new() };
+            let _ = write!(s, "{method}| {} |", r.world.replace('|', "\\|"));
+            for x in &r.action_shares {
+                let _ = write!(s, " {:.1} |", 100.0 * x);
+            }
+            s.push('\n');
+        }
+    }
     s
 }
 
@@ -466,6 +506,7 @@ mod tests {
             reach_m_mean: 2.5,
             return_mean: 10.0,
             navigation: false,
+            action_shares: Vec::new(),
         }
     }
 

@@ -4,7 +4,7 @@
 use mdrlat_core::{Action, Observation, Policy, PolicyError, Sensors};
 use mdrlat_eval::{
     EvalSettings, Pick, WorldEval, WorldSummary, draw_episode, episode_seed, episodes_csv,
-    eval_sim_config, evaluate_world, pick_episodes, summary_csv,
+    eval_sim_config, evaluate_world, pick_episodes, summary_csv, summary_markdown,
 };
 use mdrlat_sim::{MovingRule, Scripted, SimConfig};
 use mdrlat_world::World;
@@ -122,6 +122,10 @@ fn spinning_and_circling_score_by_the_papers_measure_and_zero_by_the_moving_one(
             } else {
                 assert!(e.records.iter().all(|r| r.path_m < 0.05), "spin drove");
             }
+            // Every decision the one action: the summary's action shares say so.
+            let a = p.constant_action().expect("constant").index();
+            assert_eq!(s.action_shares[a], 1.0, "{p:?}: {:?}", s.action_shares);
+            assert!(summary_markdown(std::slice::from_ref(&s)).contains("Actions taken"));
         }
         let e = eval(&w, Scripted::Wander, &settings);
         let s = WorldSummary::new("wander", &e, &settings);
