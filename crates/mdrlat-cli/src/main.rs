@@ -106,6 +106,17 @@ enum WorldCommand {
         /// Path to the world file or map YAML.
         file: PathBuf,
     },
+    /// Writes a procedural world: rooms split by walls with one door each, furniture of
+    /// every height class (tall, under the laser plane, overhanging), walkers. The same seed
+    /// gives the same file; `--world gen-N` anywhere uses it without a file.
+    Generate {
+        /// Seed of the world.
+        #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+        seed: u64,
+        /// The world file to write (default: print it).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
 }
 
 #[derive(Debug, Subcommand)]
@@ -161,6 +172,9 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Eval(a) => cmd::eval::run(&a),
         Command::Worlds => cmd::worlds::list(),
         Command::World(WorldCommand::Check { file }) => cmd::worlds::check(&file),
+        Command::World(WorldCommand::Generate { seed, out }) => {
+            cmd::worlds::generate(seed, out.as_deref())
+        }
         Command::Observe(a) => cmd::observe::run(&a),
         Command::Render(a) => cmd::render::run(&a),
         Command::Rollout(a) => cmd::rollout::run(&a),

@@ -37,6 +37,30 @@ fn world_check_accepts_good_files_and_names_the_problem_in_bad_ones() {
     let o = mdrlat(&["world", "check", good.to_str().expect("utf8")]);
     assert!(o.status.success(), "{}", stderr(&o));
 
+    // A generated world: written, checked, the same bytes again, and usable as gen-N.
+    let generated = d.join("gen.toml");
+    let g = generated.to_str().expect("utf8");
+    let o = mdrlat(&["world", "generate", "--seed", "11", "--out", g]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let first = std::fs::read(&generated).expect("written");
+    assert!(mdrlat(&["world", "check", g]).status.success());
+    let o = mdrlat(&["world", "generate", "--seed", "11"]);
+    assert_eq!(
+        String::from_utf8_lossy(&o.stdout).trim_end(),
+        String::from_utf8_lossy(&first).trim_end()
+    );
+    let o = mdrlat(&[
+        "render",
+        "--world",
+        "gen-11",
+        "--world-only",
+        "--out",
+        d.join("g.png").to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_clean_failure(&mdrlat(&["world", "generate", "--seed", "-3"]), &["--seed", "-3"]);
+    assert_clean_failure(&mdrlat(&["render", "--world", "gen-x"]), &["gen-x", "gen-N"]);
+
     let cases: [(&str, String, &[&str]); 5] = [
         (
             "negative.toml",

@@ -250,3 +250,16 @@ fn the_classical_avoider_gets_through_the_test_worlds() {
         assert!(s.path_m_mean > 15.0, "{name}: it drives: {s:?}");
     }
 }
+
+/// Generated worlds are drivable: the classical avoider gets through them as through the
+/// built-in test worlds (doors wide enough, furniture with room around it, no trapped start).
+#[test]
+fn the_classical_avoider_gets_through_generated_worlds() {
+    let settings = EvalSettings { episodes: 10, runs: 1, max_steps: 300, ..small(5, 10) };
+    for seed in [1, 2, 3] {
+        let w = mdrlat_world::generate(seed).expect("valid");
+        let e = eval(&w, Scripted::Avoid, &settings);
+        let s = WorldSummary::new("avoid", &e, &settings);
+        assert!(s.moving_success_mean >= 0.8, "gen-{seed}: {s:?}");
+    }
+}

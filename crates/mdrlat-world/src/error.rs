@@ -34,7 +34,7 @@ pub enum WorldError {
     },
     /// Neither a built-in world name nor an existing file.
     #[error(
-        "unknown world '{name}': not a built-in world ({builtins}) nor an existing .toml or map_server .yaml file"
+        "unknown world '{name}': not a built-in world ({builtins}), a generated one (gen-N) nor an existing .toml or map_server .yaml file"
     )]
     Unknown {
         /// What was asked for.

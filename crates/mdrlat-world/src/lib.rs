@@ -9,9 +9,11 @@
 pub mod builtin;
 mod error;
 mod format;
+pub mod generate;
 pub mod map_server;
 mod world;
 
 pub use error::WorldError;
 pub use format::FORMAT_VERSION;
+pub use generate::{generate, generate_toml};
 pub use world::{Obstacle, PedestrianSpec, World, load};

@@ -293,14 +293,18 @@ impl World {
     }
 }
 
-/// Loads a world by built-in name, or from a `.toml` world file, or from a ROS map_server
-/// `.yaml` (imported with default options: see [`crate::map_server`]).
+/// Loads a world by built-in name, `gen-N` (the generated world of seed N, see
+/// [`crate::generate`]), or from a `.toml` world file, or from a ROS map_server `.yaml`
+/// (imported with default options: see [`crate::map_server`]).
 ///
 /// # Errors
 /// An unknown name or any error of the file.
 pub fn load(spec: &str) -> Result<World, WorldError> {
     if let Some(w) = crate::builtin::get(spec) {
         return w;
+    }
+    if let Some(seed) = spec.strip_prefix("gen-").and_then(|n| n.parse::<u64>().ok()) {
+        return crate::generate(seed);
     }
     let path = Path::new(spec);
     if !path.is_file() {

@@ -35,7 +35,10 @@ pub fn list() -> Result<()> {
             out!("{:<10} {}", "", w.description);
         }
     }
-    out!("\nAny command taking --world also accepts a .toml world file or a ROS map_server .yaml.");
+    out!(
+        "\nAny command taking --world also accepts gen-N (a generated world, `mdrlat world \
+         generate`), a .toml world file or a ROS map_server .yaml."
+    );
     Ok(())
 }
 
@@ -47,5 +50,21 @@ pub fn check(file: &Path) -> Result<()> {
     }
     let w = mdrlat_world::load(spec)?;
     out!("{}: ok: '{}'  {}", file.display(), w.name, summary(&w));
+    Ok(())
+}
+
+/// `mdrlat world generate --seed N [--out FILE]`.
+pub fn generate(seed: u64, out: Option<&Path>) -> Result<()> {
+    let text = mdrlat_world::generate_toml(seed);
+    let w = World::from_toml(&format!("gen-{seed}"), &text)?;
+    match out {
+        Some(path) => {
+            super::ensure_parent(path)?;
+            std::fs::write(path, &text)
+                .with_context(|| format!("cannot write {}", path.display()))?;
+            out!("{}: '{}'  {}", path.display(), w.name, summary(&w));
+        }
+        None => out!("{}", text.trim_end()),
+    }
     Ok(())
 }
