@@ -28,8 +28,8 @@ impl Config {
     /// A run's resolved `config.toml`, as the version that wrote it meant it: a run writes
     /// every setting, so a key it lacks is one added since, and it gets the value that
     /// reproduces the simulator the run started in (walkers that ignore the robot, starts
-    /// without the hidden-obstacle clearance), never today's default. A resumed run goes on
-    /// in the world it began in.
+    /// without the hidden-obstacle clearance) and the learner it started with (one Adam for
+    /// both losses), never today's default. A resumed run goes on as it began.
     pub fn load_run(path: &Path) -> Result<Config> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read config {}", path.display()))?;
@@ -38,6 +38,11 @@ impl Config {
         if let Some(sim) = tree.get_mut("sim").and_then(toml::Value::as_table_mut) {
             for (key, before) in LEGACY_SIM {
                 sim.entry(key).or_insert(toml::Value::Float(before));
+            }
+        }
+        if let Some(train) = tree.get_mut("train").and_then(toml::Value::as_table_mut) {
+            for (key, before) in LEGACY_TRAIN {
+                train.entry(key).or_insert(toml::Value::String(before.into()));
             }
         }
         let config: Config = tree.try_into().map_err(|e: toml::de::Error| {
@@ -84,6 +89,10 @@ impl Config {
 /// simulator as it was before them (see [`Config::load_run`]).
 const LEGACY_SIM: [(&str, f64); 2] =
     [("pedestrian_yield_m", -1.0), ("spawn_hidden_clearance_m", 0.0)];
+
+/// Training settings added after runs were first written, with the value that trains as
+/// before them (see [`Config::load_run`]): one Adam for both losses.
+const LEGACY_TRAIN: [(&str, &str); 1] = [("aux_optimizer", "joint")];
 
 /// Applies one `dotted.key=value` override to a TOML tree.
 fn apply_set(tree: &mut toml::Table, set: &str) -> Result<()> {
@@ -154,14 +163,15 @@ mod tests {
         let sim = old.get_mut("sim").and_then(toml::Value::as_table_mut).expect("sim");
         sim.remove("pedestrian_yield_m");
         sim.remove("spawn_hidden_clearance_m");
+        let train = old.get_mut("train").and_then(toml::Value::as_table_mut).expect("train");
+        train.remove("aux_optimizer");
         std::fs::write(&path, toml::to_string(&old).expect("toml")).expect("write");
         let c = Config::load_run(&path).expect("loads");
         assert_eq!((c.sim.pedestrian_yield_m, c.sim.spawn_hidden_clearance_m), (-1.0, 0.0));
-        assert_eq!(
-            Config::load(&path).expect("loads").sim.pedestrian_yield_m,
-            0.3,
-            "plain loads take today's defaults"
-        );
+        assert_eq!(c.train.aux_optimizer, mdrlat_train::AuxOptimizer::Joint, "one Adam, as then");
+        let plain = Config::load(&path).expect("loads");
+        assert_eq!(plain.sim.pedestrian_yield_m, 0.3, "plain loads take today's defaults");
+        assert_eq!(plain.train.aux_optimizer, mdrlat_train::AuxOptimizer::Separate);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

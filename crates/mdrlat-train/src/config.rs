@@ -36,8 +36,15 @@ pub struct TrainConfig {
     pub epsilon_end: f32,
     /// Steps over which ε decays linearly.
     pub epsilon_decay_steps: u64,
-    /// Weight of the auxiliary loss (eq. 12) added to the TD loss (eq. 13).
+    /// Weight of the auxiliary loss (eq. 12): it scales that loss's gradient (with
+    /// `aux_optimizer = "joint"`, its share of the summed loss).
     pub aux_loss_weight: f32,
+    /// How the auxiliary loss (eq. 12) moves the network: `separate` (the paper's section 3.1,
+    /// "two Adam optimizers", and the authors' code), its own Adam beside the TD loss's, each
+    /// with its own moments, both from the same forward pass; `joint`, one Adam on
+    /// `L_TD + aux_loss_weight · L_AT` (mdrlat before 2026-12-06; runs written then resume
+    /// with it).
+    pub aux_optimizer: AuxOptimizer,
     /// Steps between greedy evaluations (Fig. 4).
     pub eval_interval: u64,
     /// Episodes per evaluation, from fixed start poses.
@@ -85,6 +92,7 @@ impl Default for TrainConfig {
             epsilon_end: 0.0001,
             epsilon_decay_steps: 20_000,
             aux_loss_weight: 1.0,
+            aux_optimizer: AuxOptimizer::Separate,
             eval_interval: 5_000,
             eval_episodes: 5,
             eval_seed: 1_000_000,
@@ -95,6 +103,18 @@ impl Default for TrainConfig {
             checkpoint_interval: 10_000,
         }
     }
+}
+
+/// How the auxiliary loss's gradient reaches the weights (see
+/// [`TrainConfig::aux_optimizer`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AuxOptimizer {
+    /// A second Adam, with its own moments, for the auxiliary loss (the paper's).
+    #[default]
+    Separate,
+    /// One Adam on the weighted sum of both losses.
+    Joint,
 }
 
 /// An inconsistent or out-of-range setting.

@@ -2,7 +2,7 @@
 //! (paper eqs. 10, 12, 13; Algorithm 1 lines 6–17).
 
 use crate::adam::{AdamCounts, FusedAdam};
-use crate::config::TrainConfig;
+use crate::config::{AuxOptimizer, TrainConfig};
 use crate::replay::{Batch, DepthLayout};
 use mdrlat_core::{
     Action, DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY, PolicyError,
@@ -101,7 +101,14 @@ pub struct Learner {
     /// double-DQN argmax use it, so the module is not re-mapped on every call.
     plain: QNet,
     target: QNet,
+    /// Adam of the TD loss (eq. 13), and of the auxiliary loss too with
+    /// [`AuxOptimizer::Joint`].
     optim: ModuleOptimizer,
+    /// The auxiliary loss's own Adam (eq. 12), with [`AuxOptimizer::Separate`] in a variant
+    /// with the auxiliary task: it steps the streams, the fusion and the velocity head with
+    /// that loss's gradient and its own moments, after `optim`'s step with the TD gradient
+    /// of the same forward pass.
+    optim_aux: Option<ModuleOptimizer>,
     /// How many parameter updates the fused Adam pass made, and how many went to burn's.
     adam_counts: Arc<AdamCounts>,
     gamma: f32,
@@ -284,6 +291,11 @@ fn in_name_order(path: &Path) -> Result<(), String> {
     writer.write_to_file(path).map_err(|e| e.to_string())
 }
 
+/// The TD loss's Adam state in a checkpoint (both losses' with one optimiser).
+pub const OPTIMIZER_FILE: &str = "optimizer.bpk";
+/// The auxiliary loss's Adam state in a checkpoint, where it has its own.
+pub const AUX_OPTIMIZER_FILE: &str = "optimizer-aux.bpk";
+
 /// Milliseconds from each of three phase starts to the next, the last up to now.
 fn phase_ms(starts: [std::time::Instant; 3]) -> [f64; 3] {
     let now = std::time::Instant::now();
@@ -302,6 +314,15 @@ fn register(grads: &mut GradientsParams, g: HostGrad, device: &Device) {
     }
 }
 
+/// Host gradients as burn's optimiser takes them.
+fn to_params(host: Vec<HostGrad>, device: &Device) -> GradientsParams {
+    let mut grads = GradientsParams::new();
+    for g in host {
+        register(&mut grads, g, device);
+    }
+    grads
+}
+
 impl Learner {
     /// A fresh learner of `task` (navigation adds the goal input): the network is
     /// initialised from `seed` on `device`, the target is a copy (Algorithm 1, line 1).
@@ -315,6 +336,9 @@ impl Learner {
         let plain = online.valid();
         let adam = FusedAdam::new(config.adam_epsilon);
         let adam_counts = adam.counts();
+        let separate =
+            config.variant.auxiliary_task() && config.aux_optimizer == AuxOptimizer::Separate;
+        let optim_aux = separate.then(|| adam.clone().into_module_optimizer());
         let optim = adam.into_module_optimizer();
         Self {
             variant: config.variant,
@@ -325,6 +349,7 @@ impl Learner {
             plain,
             target,
             optim,
+            optim_aux,
             adam_counts,
             gamma: config.gamma,
             learning_rate: config.learning_rate,
@@ -590,10 +615,14 @@ impl Learner {
         let losses = match self.host_nets_for(batch) {
             Some((online, target)) => self.host_update(online, &target, batch, t0),
             None => {
-                let (grads, losses, t1) = self.gradients(batch);
+                let (grads, aux_grads, losses, t1) = self.gradients(batch);
                 let t2 = std::time::Instant::now();
                 let online = self.take_online();
-                self.online = self.optim.step(self.learning_rate, online, grads);
+                let mut online = self.optim.step(self.learning_rate, online, grads);
+                if let (Some(optim), Some(grads)) = (self.optim_aux.as_mut(), aux_grads) {
+                    online = optim.step(self.learning_rate, online, grads);
+                }
+                self.online = online;
                 self.plain = self.online.valid();
                 // Read once the Adam step is queued too (a read waits for the device).
                 let losses = losses.read();
@@ -632,17 +661,21 @@ impl Learner {
     ) -> Losses {
         let (tape, dq, dvel, losses) = self.host_losses(&online, target, batch);
         let t1 = std::time::Instant::now();
+        if self.optim_aux.is_some() {
+            return self.host_update_separate(
+                online,
+                &tape,
+                &dq,
+                dvel.as_deref(),
+                losses,
+                [t0, t1],
+            );
+        }
         let (head_grads, dh) = online.backward_heads(&tape, &dq, dvel.as_deref());
         online.release_heads();
         let t2 = std::time::Instant::now();
         let device = self.device.clone();
-        let to_params = |host: Vec<HostGrad>| {
-            let mut grads = GradientsParams::new();
-            for g in host {
-                register(&mut grads, g, &device);
-            }
-            grads
-        };
+        let to_params = |host| to_params(host, &device);
         let head_grads = to_params(head_grads);
         let net = self.take_online();
         let (optim, lr) = (&mut self.optim, self.learning_rate);
@@ -665,10 +698,57 @@ impl Learner {
         losses
     }
 
-    /// Lines 7–14: the targets, the losses and their gradients. Every tensor of the autodiff
-    /// graph is dropped on return, so the graph holds no parameter any more. The instant is
-    /// the end of the forward phase (on a GPU: of queueing it).
-    fn gradients(&self, batch: &Batch) -> (GradientsParams, PendingLosses, std::time::Instant) {
+    /// [`Learner::host_update`] with the auxiliary loss's own Adam: the backward pass of the
+    /// fusion and the streams runs once for each loss's share of the representation's
+    /// gradient (the host kernels' tape is read twice, unlike burn's graph), then the TD
+    /// loss's Adam steps with its gradient and the auxiliary loss's Adam with the other.
+    fn host_update_separate(
+        &mut self,
+        mut online: HostNet,
+        tape: &mdrlat_nn::host::Tape,
+        dq: &[f32],
+        dvel: Option<&[f32]>,
+        losses: Losses,
+        [t0, t1]: [std::time::Instant; 2],
+    ) -> Losses {
+        let (mut td_grads, dh_td, aux) = online.backward_heads_parts(tape, dq, dvel);
+        online.release_heads();
+        let t2 = std::time::Instant::now();
+        let mut clock = mdrlat_nn::host::StageClock::start();
+        let mut rest = |grads: &mut Vec<HostGrad>, dh: &[f32]| {
+            let (fusion, d_feat) = online.backward_fusion(tape, dh, &mut clock);
+            grads.extend(fusion);
+            grads.extend(online.backward_streams(tape, &d_feat, &mut clock));
+        };
+        rest(&mut td_grads, &dh_td);
+        let aux_grads = aux.map(|(mut grads, dh)| {
+            rest(&mut grads, &dh);
+            grads
+        });
+        drop(online);
+        let device = self.device.clone();
+        let to_params = |host| to_params(host, &device);
+        let lr = self.learning_rate;
+        let net = self.take_online();
+        let mut net = self.optim.step(lr, net, to_params(td_grads));
+        if let (Some(optim), Some(grads)) = (self.optim_aux.as_mut(), aux_grads) {
+            net = optim.step(lr, net, to_params(grads));
+        }
+        self.online = net;
+        self.plain = self.online.valid();
+        self.phase_ms = phase_ms([t0, t1, t2]);
+        losses
+    }
+
+    /// Lines 7–14: the targets, the losses and their gradients: of their weighted sum, or with
+    /// a separate auxiliary optimiser the TD loss's and (second) the auxiliary loss's apart.
+    /// Every tensor of the autodiff graph is dropped on return, so the graph holds no
+    /// parameter any more. The instant is the end of the forward phase (on a GPU: of queueing
+    /// it).
+    fn gradients(
+        &self,
+        batch: &Batch,
+    ) -> (GradientsParams, Option<GradientsParams>, PendingLosses, std::time::Instant) {
         let b = batch.size;
         let (y, out) = self.targets_and_forward(batch);
         // A constant of the graph, where it was computed (no round trip through the host).
@@ -685,21 +765,31 @@ impl Learner {
         let td = (y - q_sa).square().mean(); // [1]
 
         // Lines 13–14, eq. (12): Σ over t−2..t of (v − ṽ)² + (ω − ω̃)².
-        let (loss, at) = match out.velocity {
-            Some(v_hat) => {
-                let target = Tensor::<2>::from_data(
-                    TensorData::new(batch.odom.clone(), [b, 2 * ODOM_HISTORY]),
-                    &self.train_device,
-                );
-                let at = (target - v_hat).square().sum_dim(1).mean(); // [1]
-                (td.clone() + at.clone() * self.aux_weight, Some(at.inner()))
+        let aux_loss = |v_hat: Tensor<2>| {
+            let target = Tensor::<2>::from_data(
+                TensorData::new(batch.odom.clone(), [b, 2 * ODOM_HISTORY]),
+                &self.train_device,
+            );
+            (target - v_hat).square().sum_dim(1).mean() // [1]
+        };
+        let at = out.velocity.map(aux_loss);
+        let (loss, aux_grads) = match (&at, &self.optim_aux) {
+            (Some(at), None) => (td.clone() + at.clone() * self.aux_weight, None),
+            (Some(_), Some(_)) => {
+                // burn back-propagates once through a graph: the auxiliary loss's gradient
+                // comes from a second forward pass over s, with the same weights.
+                let frames = self.device_frames(batch);
+                let (l, d, g) = with_autodiff(self.inputs(batch, frames.as_ref(), false));
+                let v_hat = self.online.forward(l, d, g).velocity.expect("the auxiliary head");
+                let at = aux_loss(v_hat) * self.aux_weight;
+                (td.clone(), Some(GradientsParams::from_grads(at.backward(), &self.online)))
             }
-            None => (td.clone(), None),
+            (None, _) => (td.clone(), None),
         };
         let grads = GradientsParams::from_grads(loss.backward(), &self.online);
-        let at = at.unwrap_or_else(|| Tensor::zeros([1], &self.device));
+        let at = at.map_or_else(|| Tensor::zeros([1], &self.device), Tensor::inner);
         let losses = PendingLosses(Tensor::cat(vec![td.inner(), at, q_mean], 0));
-        (grads, losses, t1)
+        (grads, aux_grads, losses, t1)
     }
 
     /// Lines 7–14 on the host kernels, up to the backward pass: the two eq. (10) forwards on
@@ -774,9 +864,14 @@ impl Learner {
         };
         self.online.save_into(&mut store("online.bpk")).map_err(|e| format!("online.bpk: {e}"))?;
         self.target.save_into(&mut store("target.bpk")).map_err(|e| format!("target.bpk: {e}"))?;
-        let optimizer = dir.join("optimizer.bpk");
-        self.optim.save(&optimizer).map_err(|e| format!("optimizer.bpk: {e}"))?;
-        in_name_order(&optimizer).map_err(|e| format!("optimizer.bpk: {e}"))
+        let optimizers = std::iter::once((OPTIMIZER_FILE, &self.optim))
+            .chain(self.optim_aux.as_ref().map(|o| (AUX_OPTIMIZER_FILE, o)));
+        for (name, optim) in optimizers {
+            let path = dir.join(name);
+            optim.save(&path).map_err(|e| format!("{name}: {e}"))?;
+            in_name_order(&path).map_err(|e| format!("{name}: {e}"))?;
+        }
+        Ok(())
     }
 
     /// A learner of `task` restored from [`Learner::save`] files, `updates` gradient steps
@@ -798,9 +893,32 @@ impl Learner {
         let mut target = learner.net_config.init(&learner.device);
         read(&mut target, "target.bpk")?;
         learner.target = target;
-        let path = dir.join("optimizer.bpk");
+        let path = dir.join(OPTIMIZER_FILE);
         learner.optim =
             learner.optim.load(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let aux_path = dir.join(AUX_OPTIMIZER_FILE);
+        match learner.optim_aux.take() {
+            Some(_) if !aux_path.exists() => {
+                return Err(format!(
+                    "{}: missing: this checkpoint was trained with one Adam for both losses \
+                     (train.aux_optimizer = \"joint\"), its config asks for two",
+                    aux_path.display()
+                ));
+            }
+            Some(optim) => {
+                let optim =
+                    optim.load(&aux_path).map_err(|e| format!("{}: {e}", aux_path.display()))?;
+                learner.optim_aux = Some(optim);
+            }
+            None if aux_path.exists() => {
+                return Err(format!(
+                    "{}: this checkpoint was trained with a second Adam for the auxiliary loss \
+                     (train.aux_optimizer = \"separate\"), its config asks for one",
+                    aux_path.display()
+                ));
+            }
+            None => {}
+        }
         learner.updates = updates;
         Ok(learner)
     }

@@ -14,7 +14,7 @@ pub mod replay;
 pub mod tensorboard;
 pub mod train;
 
-pub use config::{TrainConfig, TrainConfigError};
+pub use config::{AuxOptimizer, TrainConfig, TrainConfigError};
 pub use learner::{Inputs, Learner, Losses};
 pub use policy::{GreedyPolicy, observation_inputs};
 pub use replay::{Batch, DepthFrames, DepthLayout, ReplayBuffer, Transition};

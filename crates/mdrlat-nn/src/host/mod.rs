@@ -1040,6 +1040,32 @@ impl HostNet {
         dq: &[f32],
         dvelocity: Option<&[f32]>,
     ) -> (Vec<HostGrad>, Vec<f32>) {
+        let (mut head_grads, mut dh, velocity) = self.backward_heads_parts(tape, dq, dvelocity);
+        if let Some((grads, part)) = velocity {
+            for (d, p) in dh.iter_mut().zip(&part) {
+                *d += p;
+            }
+            head_grads.extend(grads);
+        }
+        (head_grads, dh)
+    }
+
+    /// [`HostNet::backward_heads`] with the Q-value heads' and the auxiliary head's parts
+    /// apart: the Q heads' parameter gradients and their share of the gradient of `h`, then,
+    /// given a velocity gradient, the auxiliary head's parameter gradients and its share. A
+    /// learner that gives each loss its own optimiser carries the two shares through
+    /// [`HostNet::backward_fusion`] and [`HostNet::backward_streams`] apart. The sum of the
+    /// two shares is [`HostNet::backward_heads`]' `dh`, bit for bit.
+    ///
+    /// # Panics
+    /// As [`HostNet::backward`].
+    #[allow(clippy::type_complexity)]
+    pub fn backward_heads_parts(
+        &self,
+        tape: &Tape,
+        dq: &[f32],
+        dvelocity: Option<&[f32]>,
+    ) -> (Vec<HostGrad>, Vec<f32>, Option<(Vec<HostGrad>, Vec<f32>)>) {
         let cfg = &self.config;
         let width = cfg.representation();
         let actions = cfg.actions;
@@ -1065,7 +1091,7 @@ impl HostNet {
         assert!(!self.heads_released(), "backward_heads after release_heads");
         // Heads, side by side: the output layer, then the hidden layer and its share of dh.
         let h = &tape.h[..b * width];
-        let per_head: Vec<(Vec<HostGrad>, Vec<f32>)> = self
+        let mut per_head: Vec<(Vec<HostGrad>, Vec<f32>)> = self
             .heads
             .par_iter()
             .zip(douts.par_iter())
@@ -1083,6 +1109,7 @@ impl HostNet {
                 (gh, dh)
             })
             .collect();
+        let velocity = (per_head.len() > 2).then(|| per_head.remove(2));
         let mut dh = vec![0.0; b * width];
         let mut head_grads = Vec::new();
         for (g, part) in per_head {
@@ -1091,7 +1118,7 @@ impl HostNet {
             }
             head_grads.extend(g);
         }
-        (head_grads, dh)
+        (head_grads, dh, velocity)
     }
 
     /// Drops this network's references to the heads' weights, after
