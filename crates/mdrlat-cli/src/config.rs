@@ -9,6 +9,39 @@ use std::path::Path;
 /// The commented default configuration, embedded from `configs/default.toml`.
 pub const DEFAULT_TOML: &str = include_str!("../../../configs/default.toml");
 
+/// The `fast` preset's changes to the defaults, embedded from `configs/fast.toml`.
+pub const FAST_TOML: &str = include_str!("../../../configs/fast.toml");
+
+/// A starting point for a run's settings, below `--config` and `--set`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Preset {
+    /// The paper's settings (section 3.1, Algorithm 1): the defaults.
+    #[default]
+    Paper,
+    /// mdrlat's own recipe (`configs/fast.toml`): several environments, a random warm-up, a
+    /// larger replay, generated training worlds.
+    Fast,
+}
+
+impl Preset {
+    /// The preset's settings over the defaults, as a TOML tree.
+    fn table(self) -> toml::Table {
+        match self {
+            Preset::Paper => toml::Table::new(),
+            Preset::Fast => toml::from_str(FAST_TOML).expect("configs/fast.toml parses (tested)"),
+        }
+    }
+
+    /// Its training worlds when `--world` is not given, for `task`.
+    pub fn default_world(self, task: mdrlat_sim::config::Task) -> &'static str {
+        match (self, task) {
+            (_, mdrlat_sim::config::Task::Nav) => "nav-train",
+            (Preset::Paper, _) => "train",
+            (Preset::Fast, _) => "gen-0..64",
+        }
+    }
+}
+
 /// Every setting of mdrlat.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -62,16 +95,25 @@ impl Config {
     /// (dotted keys, TOML values: `train.gamma=0.95`, `train.variant="laser-only"`), then
     /// validated.
     pub fn resolve(path: Option<&Path>, sets: &[String]) -> Result<Config> {
-        let (source, mut tree) = match path {
+        Self::resolve_preset(Preset::Paper, path, sets)
+    }
+
+    /// [`Config::resolve`] over a preset: the preset's settings, then the file's, then the
+    /// `--set` overrides.
+    pub fn resolve_preset(preset: Preset, path: Option<&Path>, sets: &[String]) -> Result<Config> {
+        let mut tree = preset.table();
+        let source = match path {
             Some(p) => {
                 let text = std::fs::read_to_string(p)
                     .with_context(|| format!("cannot read config {}", p.display()))?;
-                let tree: toml::Table = toml::from_str(&text).map_err(|e| {
+                let file: toml::Table = toml::from_str(&text).map_err(|e| {
                     anyhow::anyhow!("{}: {}", p.display(), e.to_string().trim_end())
                 })?;
-                (p.display().to_string(), tree)
+                merge(&mut tree, file);
+                p.display().to_string()
             }
-            None => ("defaults".to_string(), toml::Table::new()),
+            None if preset == Preset::Paper => "defaults".to_string(),
+            None => format!("preset {preset:?}").to_lowercase(),
         };
         for set in sets {
             apply_set(&mut tree, set)?;
@@ -93,6 +135,18 @@ const LEGACY_SIM: [(&str, f64); 2] =
 /// Training settings added after runs were first written, with the value that trains as
 /// before them (see [`Config::load_run`]): one Adam for both losses.
 const LEGACY_TRAIN: [(&str, &str); 1] = [("aux_optimizer", "joint")];
+
+/// Puts every key of `over` into `base`, section by section.
+fn merge(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
+}
 
 /// Applies one `dotted.key=value` override to a TOML tree.
 fn apply_set(tree: &mut toml::Table, set: &str) -> Result<()> {
@@ -132,6 +186,23 @@ mod tests {
     fn the_commented_default_file_is_the_default() {
         let parsed: Config = toml::from_str(DEFAULT_TOML).expect("default.toml parses");
         assert_eq!(parsed, Config::default(), "configs/default.toml drifted from the code");
+    }
+
+    #[test]
+    fn the_fast_preset_changes_training_only_and_a_file_and_sets_go_over_it() {
+        let fast = Config::resolve_preset(Preset::Fast, None, &[]).expect("fast resolves");
+        assert_eq!(fast.sim, Config::default().sim, "fast changes no simulator setting");
+        assert_ne!(fast.train, Config::default().train);
+        assert!(fast.train.envs > 1);
+        let dir = std::env::temp_dir().join(format!("mdrlat-preset-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("c.toml");
+        std::fs::write(&path, "[train]\nenvs = 4\n").expect("write");
+        let c = Config::resolve_preset(Preset::Fast, Some(&path), &["train.seed=3".into()])
+            .expect("resolves");
+        assert_eq!((c.train.envs, c.train.seed), (4, 3));
+        assert_eq!(c.train.replay_capacity, fast.train.replay_capacity, "the preset's other keys");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

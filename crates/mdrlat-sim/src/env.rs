@@ -619,6 +619,20 @@ impl Env {
         })
     }
 
+    /// Moves the environment to another world, with the same settings and random streams,
+    /// and starts an episode there (as [`Env::reset`] with no seed): training on several
+    /// worlds changes world at an episode's end.
+    ///
+    /// # Errors
+    /// The world cannot be simulated, or no start pose is free.
+    pub fn move_to(&mut self, scene: Arc<StaticScene>) -> Result<&Observation, SimError> {
+        let mut next = Env::new(scene, self.config.clone())?;
+        next.rng = self.rng.clone();
+        next.noise_rng = self.noise_rng.clone();
+        *self = next;
+        self.reset(None)
+    }
+
     /// The environment's changing state (see [`EnvState`]).
     pub fn state(&self) -> EnvState {
         EnvState {

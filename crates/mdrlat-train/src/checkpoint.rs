@@ -84,12 +84,38 @@ pub struct Meta {
     pub sample_rng: Rng,
     /// The open metrics window.
     pub window: Window,
-    /// The training environment.
+    /// The training environment (the first, with `train.envs` > 1).
     pub env: EnvState,
+    /// Which training world the first environment is in (an index into the run's worlds;
+    /// absent with one world).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub world: usize,
+    /// The environments after the first (`train.envs` > 1), in order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub more_envs: Vec<EnvSlot>,
     /// Bytes of `replay.bin`.
     pub replay_bytes: u64,
     /// FNV-1a 64 of `replay.bin`.
     pub replay_checksum: u64,
+}
+
+/// One training environment beyond the first, where it is in its episode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EnvSlot {
+    /// Its world (an index into the run's worlds).
+    pub world: usize,
+    /// Reward so far of its running episode.
+    pub episode_reward: f32,
+    /// Length so far of its running episode.
+    pub episode_length: u32,
+    /// Replay frame ids of its observation's stack.
+    pub stack: [FrameId; 4],
+    /// Its state.
+    pub env: EnvState,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// FNV-1a over everything that passes through.
@@ -251,6 +277,16 @@ pub fn load(
             format!("truncated: {size} bytes, the checkpoint wrote {}", meta.replay_bytes),
         ));
     }
+    if meta.more_envs.len() + 1 != config.envs {
+        return Err(bad(
+            &meta_path,
+            format!(
+                "the checkpoint steps {} environments; the run asks for train.envs = {}",
+                meta.more_envs.len() + 1,
+                config.envs
+            ),
+        ));
+    }
     let mut r = Hashing::new(BufReader::with_capacity(1 << 20, file));
     let (v, cap) = (config.variant, config.replay_capacity);
     let replay = ReplayBuffer::read_from(
@@ -261,12 +297,14 @@ pub fn load(
         v.uses_laser(),
         v.uses_depth(),
         task == Task::Nav,
+        config.envs,
     )
     .map_err(|e| bad(&replay_path, e.to_string()))?;
     if r.hash != meta.replay_checksum {
         return Err(bad(&replay_path, "checksum mismatch: the file is corrupt"));
     }
-    if !meta.stack.iter().all(|&id| replay.holds_frame(id)) {
+    let stacks = std::iter::once(&meta.stack).chain(meta.more_envs.iter().map(|s| &s.stack));
+    if !stacks.flatten().all(|&id| replay.holds_frame(id)) {
         return Err(bad(
             &meta_path,
             "the current frame stack refers to frames the replay file does not hold",

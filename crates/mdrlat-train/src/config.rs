@@ -28,6 +28,14 @@ pub struct TrainConfig {
     pub learning_starts: u64,
     /// Environment steps per gradient step (paper: 1).
     pub train_frequency: u64,
+    /// Gradient steps taken each time `train_frequency` environment steps have passed
+    /// (paper: 1).
+    pub gradient_steps: u64,
+    /// Environments stepped in turn (paper: 1): their greedy decisions are one batched
+    /// forward pass, each env step is one of `total_steps`. With several training worlds
+    /// environment k starts in world k (modulo their number) and moves to the next world at
+    /// every episode's end.
+    pub envs: usize,
     /// Steps between hard copies of the online network into the target network.
     pub target_update_interval: u64,
     /// ε of ε-greedy at the start.
@@ -87,6 +95,8 @@ impl Default for TrainConfig {
             replay_capacity: 20_000,
             learning_starts: 1_000,
             train_frequency: 1,
+            gradient_steps: 1,
+            envs: 1,
             target_update_interval: 1_000,
             epsilon_start: 0.1,
             epsilon_end: 0.0001,
@@ -220,6 +230,25 @@ impl TrainConfig {
             if !(0.0..=1.0).contains(&v) {
                 return err(field, format!("must be in [0, 1], got {v}"));
             }
+        }
+        if self.gradient_steps == 0 || self.gradient_steps > 64 {
+            return err(
+                "train.gradient_steps",
+                format!("must be in 1..=64, got {}", self.gradient_steps),
+            );
+        }
+        if self.envs == 0 || self.envs > 256 {
+            return err("train.envs", format!("must be in 1..=256, got {}", self.envs));
+        }
+        if !self.total_steps.is_multiple_of(self.envs as u64) {
+            return err(
+                "train.total_steps",
+                format!(
+                    "{} is not a multiple of train.envs = {} (every environment steps as \
+                     often)",
+                    self.total_steps, self.envs
+                ),
+            );
         }
         if !(self.aux_loss_weight.is_finite() && self.aux_loss_weight >= 0.0) {
             return err(

@@ -137,6 +137,9 @@ pub struct ReplayBuffer {
     keep_depth: bool,
     /// Whether goals are stored (the navigation task).
     keep_goal: bool,
+    /// How many frames before an overwritten one a transition at the front may still hold
+    /// (see [`ReplayBuffer::with_envs`]).
+    frame_margin: u64,
 }
 
 /// Metres to millimetres, rounded; 0 and negatives stay 0, beyond 65.535 m saturates.
@@ -200,7 +203,20 @@ impl ReplayBuffer {
             keep_laser,
             keep_depth,
             keep_goal: false,
+            frame_margin: 0,
         }
+    }
+
+    /// The same buffer filled by `envs` environments in turn. One environment's transitions
+    /// arrive with their oldest frames in order, so dropping transitions from the front
+    /// until the front's frames are live drops every transition with an overwritten frame.
+    /// Interleaved, a later transition's oldest frame may precede the front's by up to four
+    /// of its environment's steps — at most two frames each (a step's and a reset's) from
+    /// every environment: the front goes while its oldest frame is within that margin of
+    /// the overwritten one, so no held transition refers to a lost frame.
+    pub fn with_envs(mut self, envs: usize) -> Self {
+        self.frame_margin = if envs > 1 { (2 * FRAME_STACK * envs) as u64 } else { 0 };
+        self
     }
 
     /// The same buffer storing each transition's goals (the navigation task) or not.
@@ -246,7 +262,8 @@ impl ReplayBuffer {
         self.frames_pushed += 1;
         if id >= self.frame_slots as u64 {
             let overwritten = id - self.frame_slots as u64;
-            while self.transitions.front().is_some_and(|t| t.oldest_frame() <= overwritten) {
+            let reach = overwritten + self.frame_margin;
+            while self.transitions.front().is_some_and(|t| t.oldest_frame() <= reach) {
                 self.transitions.pop_front();
             }
         }
@@ -506,10 +523,12 @@ impl ReplayBuffer {
     }
 
     /// Reads a buffer written by [`ReplayBuffer::write_to`]; it must have the given capacity
-    /// and sensors, and store goals exactly when `keep_goal`.
+    /// and sensors, and store goals exactly when `keep_goal`; `envs` environments filled it
+    /// (see [`ReplayBuffer::with_envs`]).
     ///
     /// # Errors
     /// A read error, a truncated or foreign file, or a buffer of another shape.
+    #[allow(clippy::too_many_arguments)]
     pub fn read_from(
         mut r: impl std::io::Read,
         len: u64,
@@ -518,6 +537,7 @@ impl ReplayBuffer {
         keep_laser: bool,
         keep_depth: bool,
         keep_goal: bool,
+        envs: usize,
     ) -> std::io::Result<Self> {
         let mut magic = [0u8; 8];
         r.read_exact(&mut magic)?;
@@ -574,7 +594,8 @@ impl ReplayBuffer {
             )));
         }
         let mut buf = ReplayBuffer::new(capacity, (slots - cap) as usize, keep_laser, keep_depth)
-            .with_goals(goals);
+            .with_goals(goals)
+            .with_envs(envs);
         if buf.frame_slots as u64 != slots {
             return Err(io_err("replay frame reserve too small".into()));
         }
@@ -609,8 +630,11 @@ impl ReplayBuffer {
                     if goals { f32_at(goal_at(GOAL_DIM + k)) } else { 0.0 }
                 }),
             };
-            let in_order =
-                buf.transitions.back().is_none_or(|p| p.oldest_frame() <= t.oldest_frame());
+            // In order, up to the interleaving of several environments' (`with_envs`).
+            let in_order = buf
+                .transitions
+                .back()
+                .is_none_or(|p| p.oldest_frame() <= t.oldest_frame() + buf.frame_margin);
             let chained = t.next[..FRAME_STACK - 1] == t.obs[1..];
             if !buf.is_live(&t) || t.action as usize >= 10 || !in_order || !chained {
                 return Err(io_err(

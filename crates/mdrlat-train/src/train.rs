@@ -6,7 +6,7 @@ use crate::checkpoint::{self, Meta, Window, frame_reserve};
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner, Losses};
 use crate::policy::observation_inputs;
-use crate::replay::{Batch, ReplayBuffer, Transition};
+use crate::replay::{Batch, FrameId, ReplayBuffer, Transition};
 use crate::tensorboard::EventWriter;
 use mdrlat_core::{Action, FRAME_STACK, ODOM_HISTORY, PolicyError, Rng};
 use mdrlat_nn::burn::prelude::Device;
@@ -33,6 +33,9 @@ pub enum TrainError {
     /// The settings are inconsistent.
     #[error(transparent)]
     Config(#[from] crate::config::TrainConfigError),
+    /// An empty list of training worlds.
+    #[error("no training world given")]
+    NoWorld,
     /// The simulator failed.
     #[error(transparent)]
     Sim(#[from] SimError),
@@ -374,15 +377,28 @@ pub const EVAL_HEADER: &str = "step,eval_reward_mean,eval_reward_std,eval_length
 eval_success_rate,eval_collision_rate,train_moving_success,train_success,train_path_m,\
 unseen_moving_success,unseen_success,unseen_path_m";
 
-/// Trains `config.variant` in `world` for `config.total_steps` steps on `device`, writing
-/// `metrics.csv`, `eval.csv` and checkpoints into `dir` (which must exist); with `resume`,
-/// continues exactly from the checkpoint in `dir`. `progress` is called after every step.
+/// One training environment and where it is: its world, its episode so far and the
+/// replay frames of its observation's stack.
+struct Slot {
+    env: Env,
+    world: usize,
+    episode_reward: f32,
+    episode_length: u32,
+    stack: [FrameId; FRAME_STACK],
+}
+
+/// Trains `config.variant` in `worlds` (at least one; with several, the environments move
+/// from world to world, see [`TrainConfig::envs`]) for `config.total_steps` steps on
+/// `device`, writing `metrics.csv`, `eval.csv` and checkpoints into `dir` (which must exist);
+/// with `resume`, continues exactly from the checkpoint in `dir`. `progress` is called after
+/// every step. The first world is the one of Fig. 4's evaluations and of the learning
+/// curves' held-out starts.
 ///
 /// # Errors
 /// Invalid settings, a simulator failure, a missing or bad checkpoint, or a file that
 /// cannot be written.
 pub fn train(
-    world: World,
+    worlds: Vec<World>,
     sim: &SimConfig,
     config: &TrainConfig,
     device: &Device,
@@ -391,24 +407,28 @@ pub fn train(
     mut progress: impl FnMut(&Status),
 ) -> Result<(TrainReport, Learner), TrainError> {
     config.validate()?;
+    let Some(first_world) = worlds.first().cloned() else {
+        return Err(TrainError::NoWorld);
+    };
     let (task, nav) = (sim.task, sim.task == Task::Nav);
     let started = Instant::now();
     // The learning curves' worlds: the training world's held-out starts, then the unseen one.
     let mut curve_worlds = Vec::new();
     if config.curve_episodes > 0 {
-        curve_worlds.push(world.clone());
+        curve_worlds.push(first_world);
         if let Some(spec) = config.curve_world_for(task) {
             let unseen = mdrlat_world::load(&spec)
                 .map_err(|source| TrainError::CurveWorld { spec: spec.clone(), source })?;
             curve_worlds.push(unseen);
         }
     }
-    let scene = Arc::new(StaticScene::new(Arc::new(world), sim));
-    let mut env = Env::new(scene.clone(), sim.clone())?;
+    let scenes: Vec<Arc<StaticScene>> =
+        worlds.into_iter().map(|w| Arc::new(StaticScene::new(Arc::new(w), sim))).collect();
+    let n_envs = config.envs;
     // One environment per evaluation episode, stepped on this thread, the network deciding
     // for all of them at once.
     let slots = config.eval_episodes.min(32) as usize;
-    let mut eval_envs = VecEnv::new(scene, sim.clone(), slots, 1)?;
+    let mut eval_envs = VecEnv::new(scenes[0].clone(), sim.clone(), slots, 1)?;
     let variant = config.variant;
     let push_latest = |replay: &mut ReplayBuffer, obs: &Observation| {
         replay.push_frame(obs.laser.latest(), obs.depth.latest())
@@ -416,12 +436,37 @@ pub fn train(
     // The goal of an observation in the robot frame, stored with each transition
     // (navigation; zeros in obstacle avoidance, where the buffer does not keep it).
     let goal_of = |obs: &Observation| obs.goal.unwrap_or_default();
+    let scene_of = |world: usize, path: &Path| {
+        scenes.get(world).cloned().ok_or_else(|| TrainError::Checkpoint {
+            path: path.to_path_buf(),
+            problem: format!("names training world {world}; the run has {}", scenes.len()),
+        })
+    };
 
     // Algorithm 1, line 1: replay buffer D, online network θ, target θ⁻ = θ — or all of it,
-    // with the environment and every random stream, from the checkpoint.
-    let (mut learner, mut replay, mut run, mut metrics, mut evals_csv) = if resume {
+    // with the environments and every random stream, from the checkpoint.
+    let (mut learner, mut replay, mut run, mut envs, mut metrics, mut evals_csv) = if resume {
         let (run, learner, replay) = checkpoint::load(dir, config, task, device)?;
-        env.restore(&run.env)?;
+        let meta_path = checkpoint::folder(dir).join("meta.json");
+        let first = checkpoint::EnvSlot {
+            world: run.world,
+            episode_reward: run.episode_reward,
+            episode_length: run.episode_length,
+            stack: run.stack,
+            env: run.env.clone(),
+        };
+        let mut envs = Vec::with_capacity(n_envs);
+        for saved in std::iter::once(&first).chain(&run.more_envs) {
+            let mut env = Env::new(scene_of(saved.world, &meta_path)?, sim.clone())?;
+            env.restore(&saved.env)?;
+            envs.push(Slot {
+                env,
+                world: saved.world,
+                episode_reward: saved.episode_reward,
+                episode_length: saved.episode_length,
+                stack: saved.stack,
+            });
+        }
         // A partial-window row at the checkpoint step is written again, complete — unless
         // the run is already at its end (killed after its last checkpoint): then nothing
         // would write it again, and it is kept.
@@ -432,19 +477,27 @@ pub fn train(
             run.step % LOG_INTERVAL == 0 || run.step >= config.total_steps,
         )?;
         let evals = reopen(dir.join("eval.csv"), EVAL_HEADER, run.step, true)?;
-        (learner, replay, run, metrics, evals)
+        (learner, replay, run, envs, metrics, evals)
     } else {
-        // Seeding in one block: network init (inside Learner::new), environment,
-        // exploration and replay sampling — each its own stream of the run's seed.
-        env.reset_stream(config.seed, 0)?;
+        // Seeding in one block: network init (inside Learner::new), environments (one
+        // stream each), exploration and replay sampling — each its own stream of the seed.
         let mut replay = ReplayBuffer::new(
             config.replay_capacity,
             frame_reserve(config.replay_capacity),
             variant.uses_laser(),
             variant.uses_depth(),
         )
-        .with_goals(nav);
-        let first = push_latest(&mut replay, env.observation());
+        .with_goals(nav)
+        .with_envs(n_envs);
+        let mut envs = Vec::with_capacity(n_envs);
+        for k in 0..n_envs {
+            let world = k % scenes.len();
+            let mut env = Env::new(scenes[world].clone(), sim.clone())?;
+            env.reset_stream(config.seed, k as u64)?;
+            let first = push_latest(&mut replay, env.observation());
+            let stack = [first; FRAME_STACK];
+            envs.push(Slot { env, world, episode_reward: 0.0, episode_length: 0, stack });
+        }
         let run = Meta {
             format: checkpoint::CHECKPOINT_FORMAT,
             mdrlat_version: env!("CARGO_PKG_VERSION").to_string(),
@@ -455,17 +508,19 @@ pub fn train(
             episodes: 0,
             episode_reward: 0.0,
             episode_length: 0,
-            stack: [first; FRAME_STACK],
+            stack: envs[0].stack,
             explore_rng: Rng::derive(config.seed, 101),
             sample_rng: Rng::derive(config.seed, 102),
             window: Window::default(),
-            env: env.state(),
+            env: envs[0].env.state(),
+            world: 0,
+            more_envs: Vec::new(),
             replay_bytes: 0,
             replay_checksum: 0,
         };
         let metrics = Csv::create(dir.join("metrics.csv"), METRICS_HEADER)?;
         let evals = Csv::create(dir.join("eval.csv"), EVAL_HEADER)?;
-        (Learner::new(config, task, device), replay, run, metrics, evals)
+        (Learner::new(config, task, device), replay, run, envs, metrics, evals)
     };
     let mut events = EventWriter::create(dir)
         .map_err(|source| TrainError::Io { path: dir.to_path_buf(), source })?;
@@ -486,170 +541,181 @@ pub fn train(
         timing: Timing::default(),
     };
     let (mut lap, mut timing) = (Lap(Instant::now()), Timing::default());
+    let (mut actions, mut greedy_envs) = (vec![0usize; n_envs], Vec::with_capacity(n_envs));
 
-    // Algorithm 1, line 2.
-    for t in run.step + 1..=config.total_steps {
-        // Line 3: ε-greedy on s_k.
-        let epsilon = config.epsilon(t - 1);
-        let action = if run.explore_rng.uniform() < f64::from(epsilon) {
-            run.explore_rng.below(Action::COUNT)
-        } else {
-            observation_inputs(&[env.observation()], learner.net_config(), &mut inputs)
-                .map_err(|source| TrainError::Policy { step: t, source })?;
-            let greedy =
-                learner.greedy(&inputs).map_err(|source| TrainError::Policy { step: t, source })?;
-            greedy[0].index()
-        };
-        timing.acting += lap.split();
-        let (odom, goal) = (odom_of(env.observation()), goal_of(env.observation()));
-        // Line 4: execute a_k, observe r_k and s_{k+1}.
-        let s =
-            env.step(Action::new(action).unwrap_or_else(|| unreachable!("action index < 10")))?;
-        timing.env += lap.split();
-        let (reward, terminated, done) = (s.reward, s.terminated, s.terminated || s.truncated);
-        // Line 5: store (s_k, a_k, r_k, s_{k+1}); s_{k+1} is the true final observation at an
-        // episode's end, and only a collision or the goal (terminated) marks it terminal.
-        let newest = push_latest(&mut replay, s.observation);
-        let stack = run.stack;
-        let next = [stack[1], stack[2], stack[3], newest];
-        replay.push(Transition {
-            obs: stack,
-            next,
-            action: action as u8,
-            reward,
-            terminated,
-            odom,
-            goal,
-            next_goal: goal_of(s.observation),
-        });
-        run.episode_reward += reward;
-        run.episode_length += 1;
-        if done {
-            run.window.episode_reward += f64::from(run.episode_reward);
-            run.window.episode_length += f64::from(run.episode_length);
-            run.window.episodes += 1;
-            run.episodes += 1;
-            (run.episode_reward, run.episode_length) = (0.0, 0);
-            env.reset(None)?;
-            let first = push_latest(&mut replay, env.observation());
-            run.stack = [first; FRAME_STACK];
-        } else {
-            run.stack = next;
-        }
-        timing.storing += lap.split();
-
-        // Lines 6–15: one gradient step on a random batch.
-        if replay.len() as u64 >= config.learning_starts && t % config.train_frequency == 0 {
-            let idx = replay.sample_indices(config.batch_size, &mut run.sample_rng);
-            replay.write_batch_as(&idx, &mut batch, learner.depth_layout());
-            timing.sampling += lap.split();
-            let losses = learner.update(&batch);
-            status.losses = losses;
-            run.window.td += f64::from(losses.td);
-            run.window.at += f64::from(losses.at);
-            run.window.q += f64::from(losses.q_mean);
-            run.window.updates += 1;
-        }
-        // Lines 16–18: θ⁻ ← θ every N_t steps.
-        if t % config.target_update_interval == 0 {
-            learner.sync_target();
-        }
-        timing.learning += lap.split();
-
-        if t % LOG_INTERVAL == 0 || t == config.total_steps {
-            let w = run.window;
-            let mean = |x: f64, n: u32| {
-                if n > 0 { format!("{:.6}", x / f64::from(n)) } else { String::new() }
-            };
-            metrics.line(&format!(
-                "{t},{},{},{},{epsilon:.6},{},{},{}",
-                mean(w.td, w.updates),
-                mean(w.at, w.updates),
-                mean(w.q, w.updates),
-                mean(w.episode_reward, w.episodes),
-                mean(w.episode_length, w.episodes),
-                run.episodes
-            ))?;
-            let per = |x: f64, n: u32| if n > 0 { (x / f64::from(n)) as f32 } else { f32::NAN };
-            events
-                .scalars(
-                    t,
-                    &[
-                        ("losses/td", per(w.td, w.updates)),
-                        ("losses/at", per(w.at, w.updates)),
-                        ("losses/q_mean", per(w.q, w.updates)),
-                        ("charts/epsilon", epsilon),
-                        ("charts/episode_reward", per(w.episode_reward, w.episodes)),
-                        ("charts/episode_length", per(w.episode_length, w.episodes)),
-                    ],
-                )
-                .map_err(|e| tb_err(&events, e))?;
-            metrics.flush()?; // one write per 100 steps: `tail -f metrics.csv` works
-            // A run's last row may cover a partial window; its sums stay open (and go into
-            // the checkpoint) so that an extended run logs exactly what one long run would.
-            if t % LOG_INTERVAL == 0 {
-                run.window = Window::default();
+    // Algorithm 1, line 2, for every environment in turn: a tick steps each once.
+    let mut done_steps = run.step;
+    while done_steps < config.total_steps {
+        // Line 3: ε-greedy on each environment's s_k; the greedy ones in one forward pass.
+        greedy_envs.clear();
+        for (k, action) in actions.iter_mut().enumerate() {
+            let epsilon = config.epsilon(done_steps + k as u64);
+            if run.explore_rng.uniform() < f64::from(epsilon) {
+                *action = run.explore_rng.below(Action::COUNT);
+            } else {
+                greedy_envs.push(k);
             }
         }
-        timing.output += lap.split();
-        if t % config.eval_interval == 0 {
-            let e = evaluate(&mut eval_envs, &learner, config, sim, &curve_worlds, t)?;
-            let mean_len = e.lengths.iter().map(|&l| f64::from(l)).sum::<f64>()
-                / e.lengths.len().max(1) as f64;
-            // The curves' columns: held-out training starts, then the unseen world.
-            let mut curve_cells = String::new();
-            for k in 0..2 {
-                match e.curves.get(k) {
-                    Some(c) => curve_cells.push_str(&format!(
-                        ",{:.6},{:.6},{:.3}",
-                        c.moving_success, c.success, c.path_m
-                    )),
-                    None => curve_cells.push_str(",,,"),
+        if !greedy_envs.is_empty() {
+            let at = done_steps + 1 + greedy_envs[0] as u64;
+            let observations: Vec<&Observation> =
+                greedy_envs.iter().map(|&k| envs[k].env.observation()).collect();
+            observation_inputs(&observations, learner.net_config(), &mut inputs)
+                .map_err(|source| TrainError::Policy { step: at, source })?;
+            let greedy = learner
+                .greedy(&inputs)
+                .map_err(|source| TrainError::Policy { step: at, source })?;
+            for (&k, a) in greedy_envs.iter().zip(&greedy) {
+                actions[k] = a.index();
+            }
+        }
+        timing.acting += lap.split();
+        let mut checkpoint_due = false;
+        for (k, slot) in envs.iter_mut().enumerate() {
+            let t = done_steps + 1 + k as u64;
+            let epsilon = config.epsilon(t - 1);
+            let action = actions[k];
+            let (odom, goal) = (odom_of(slot.env.observation()), goal_of(slot.env.observation()));
+            // Line 4: execute a_k, observe r_k and s_{k+1}.
+            let a = Action::new(action).unwrap_or_else(|| unreachable!("action index < 10"));
+            let s = slot.env.step(a)?;
+            timing.env += lap.split();
+            let (reward, terminated, done) = (s.reward, s.terminated, s.terminated || s.truncated);
+            // Line 5: store (s_k, a_k, r_k, s_{k+1}); s_{k+1} is the true final observation at
+            // an episode's end, and only a collision or the goal (terminated) marks it
+            // terminal.
+            let newest = push_latest(&mut replay, s.observation);
+            let stack = slot.stack;
+            let next = [stack[1], stack[2], stack[3], newest];
+            replay.push(Transition {
+                obs: stack,
+                next,
+                action: action as u8,
+                reward,
+                terminated,
+                odom,
+                goal,
+                next_goal: goal_of(s.observation),
+            });
+            slot.episode_reward += reward;
+            slot.episode_length += 1;
+            if done {
+                run.window.episode_reward += f64::from(slot.episode_reward);
+                run.window.episode_length += f64::from(slot.episode_length);
+                run.window.episodes += 1;
+                run.episodes += 1;
+                (slot.episode_reward, slot.episode_length) = (0.0, 0);
+                if scenes.len() > 1 {
+                    // The next world, keeping the environment's random streams.
+                    slot.world = (slot.world + 1) % scenes.len();
+                    slot.env.move_to(scenes[slot.world].clone())?;
+                } else {
+                    slot.env.reset(None)?;
+                }
+                let first = push_latest(&mut replay, slot.env.observation());
+                slot.stack = [first; FRAME_STACK];
+            } else {
+                slot.stack = next;
+            }
+            timing.storing += lap.split();
+
+            // Lines 6–15: gradient steps on random batches.
+            if replay.len() as u64 >= config.learning_starts && t.is_multiple_of(config.train_frequency) {
+                for _ in 0..config.gradient_steps {
+                    let idx = replay.sample_indices(config.batch_size, &mut run.sample_rng);
+                    replay.write_batch_as(&idx, &mut batch, learner.depth_layout());
+                    timing.sampling += lap.split();
+                    let losses = learner.update(&batch);
+                    status.losses = losses;
+                    run.window.td += f64::from(losses.td);
+                    run.window.at += f64::from(losses.at);
+                    run.window.q += f64::from(losses.q_mean);
+                    run.window.updates += 1;
                 }
             }
-            evals_csv.line(&format!(
-                "{t},{:.6},{:.6},{mean_len:.2},{:.6},{:.6}{curve_cells}",
-                e.mean(),
-                e.std(),
-                e.success_rate(),
-                e.collision_rate()
-            ))?;
-            let mut scalars = vec![
-                ("eval/reward_mean".to_string(), e.mean()),
-                ("eval/reward_std".to_string(), e.std()),
-                ("eval/length_mean".to_string(), mean_len as f32),
-                ("eval/success_rate".to_string(), e.success_rate()),
-                ("eval/collision_rate".to_string(), e.collision_rate()),
-            ];
-            for (c, which) in e.curves.iter().zip(["train", "unseen"]) {
-                scalars.extend([
-                    (format!("curves/{which}_moving_success"), c.moving_success as f32),
-                    (format!("curves/{which}_success"), c.success as f32),
-                    (format!("curves/{which}_path_m"), c.path_m as f32),
-                ]);
+            // Lines 16–18: θ⁻ ← θ every N_t steps.
+            if t.is_multiple_of(config.target_update_interval) {
+                learner.sync_target();
             }
-            let named: Vec<(&str, f32)> = scalars.iter().map(|(k, v)| (k.as_str(), *v)).collect();
-            events.scalars(t, &named).map_err(|e| tb_err(&events, e))?;
-            evals_csv.flush()?;
-            status.last_eval = Some(e.mean());
-            report.evaluations.push(e);
+            timing.learning += lap.split();
+
+            if t.is_multiple_of(LOG_INTERVAL) || t == config.total_steps {
+                let w = run.window;
+                let mean = |x: f64, n: u32| {
+                    if n > 0 { format!("{:.6}", x / f64::from(n)) } else { String::new() }
+                };
+                metrics.line(&format!(
+                    "{t},{},{},{},{epsilon:.6},{},{},{}",
+                    mean(w.td, w.updates),
+                    mean(w.at, w.updates),
+                    mean(w.q, w.updates),
+                    mean(w.episode_reward, w.episodes),
+                    mean(w.episode_length, w.episodes),
+                    run.episodes
+                ))?;
+                let per = |x: f64, n: u32| if n > 0 { (x / f64::from(n)) as f32 } else { f32::NAN };
+                events
+                    .scalars(
+                        t,
+                        &[
+                            ("losses/td", per(w.td, w.updates)),
+                            ("losses/at", per(w.at, w.updates)),
+                            ("losses/q_mean", per(w.q, w.updates)),
+                            ("charts/epsilon", epsilon),
+                            ("charts/episode_reward", per(w.episode_reward, w.episodes)),
+                            ("charts/episode_length", per(w.episode_length, w.episodes)),
+                        ],
+                    )
+                    .map_err(|e| tb_err(&events, e))?;
+                metrics.flush()?; // one write per 100 steps: `tail -f metrics.csv` works
+                // A run's last row may cover a partial window; its sums stay open (and go
+                // into the checkpoint) so that an extended run logs exactly what one long run
+                // would.
+                if t.is_multiple_of(LOG_INTERVAL) {
+                    run.window = Window::default();
+                }
+            }
+            timing.output += lap.split();
+            if t.is_multiple_of(config.eval_interval) {
+                let e = evaluate(&mut eval_envs, &learner, config, sim, &curve_worlds, t)?;
+                write_evaluation(&e, &mut evals_csv, &mut events)?;
+                status.last_eval = Some(e.mean());
+                report.evaluations.push(e);
+            }
+            timing.evaluation += lap.split();
+            // A checkpoint every interval and at the end (so a finished run can be
+            // extended), written once the tick is done: every environment then stands after
+            // its step.
+            checkpoint_due |= t.is_multiple_of(config.checkpoint_interval) || t == config.total_steps;
+            status.step = t;
+            status.epsilon = epsilon;
+            status.episodes = run.episodes;
+            progress(&status);
+            timing.output += lap.split();
         }
-        timing.evaluation += lap.split();
-        // A checkpoint every interval and at the end, so a finished run can be extended.
-        if t % config.checkpoint_interval == 0 || t == config.total_steps {
+        done_steps += n_envs as u64;
+        if checkpoint_due {
             events.flush().map_err(|e| tb_err(&events, e))?;
             metrics.flush()?;
             evals_csv.flush()?;
-            run.step = t;
+            run.step = done_steps;
             run.updates = learner.updates();
-            run.env = env.state();
+            let [first, rest @ ..] = envs.as_slice() else { unreachable!("train.envs >= 1") };
+            (run.env, run.world, run.stack) = (first.env.state(), first.world, first.stack);
+            (run.episode_reward, run.episode_length) = (first.episode_reward, first.episode_length);
+            run.more_envs = rest
+                .iter()
+                .map(|s| checkpoint::EnvSlot {
+                    world: s.world,
+                    episode_reward: s.episode_reward,
+                    episode_length: s.episode_length,
+                    stack: s.stack,
+                    env: s.env.state(),
+                })
+                .collect();
             checkpoint::save(dir, &mut run, &learner, &replay)?;
+            timing.output += lap.split();
         }
-        status.step = t;
-        status.epsilon = epsilon;
-        status.episodes = run.episodes;
-        progress(&status);
-        timing.output += lap.split();
     }
     metrics.flush()?;
     evals_csv.flush()?;
@@ -660,6 +726,52 @@ pub fn train(
     report.seconds = started.elapsed().as_secs_f64();
     report.timing = timing;
     Ok((report, learner))
+}
+
+/// One evaluation's row of `eval.csv` and its TensorBoard scalars.
+fn write_evaluation(
+    e: &Evaluation,
+    evals_csv: &mut Csv,
+    events: &mut EventWriter,
+) -> Result<(), TrainError> {
+    let t = e.step;
+    let mean_len =
+        e.lengths.iter().map(|&l| f64::from(l)).sum::<f64>() / e.lengths.len().max(1) as f64;
+    // The curves' columns: held-out training starts, then the unseen world.
+    let mut curve_cells = String::new();
+    for k in 0..2 {
+        match e.curves.get(k) {
+            Some(c) => curve_cells
+                .push_str(&format!(",{:.6},{:.6},{:.3}", c.moving_success, c.success, c.path_m)),
+            None => curve_cells.push_str(",,,"),
+        }
+    }
+    evals_csv.line(&format!(
+        "{t},{:.6},{:.6},{mean_len:.2},{:.6},{:.6}{curve_cells}",
+        e.mean(),
+        e.std(),
+        e.success_rate(),
+        e.collision_rate()
+    ))?;
+    let mut scalars = vec![
+        ("eval/reward_mean".to_string(), e.mean()),
+        ("eval/reward_std".to_string(), e.std()),
+        ("eval/length_mean".to_string(), mean_len as f32),
+        ("eval/success_rate".to_string(), e.success_rate()),
+        ("eval/collision_rate".to_string(), e.collision_rate()),
+    ];
+    for (c, which) in e.curves.iter().zip(["train", "unseen"]) {
+        scalars.extend([
+            (format!("curves/{which}_moving_success"), c.moving_success as f32),
+            (format!("curves/{which}_success"), c.success as f32),
+            (format!("curves/{which}_path_m"), c.path_m as f32),
+        ]);
+    }
+    let named: Vec<(&str, f32)> = scalars.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    events
+        .scalars(t, &named)
+        .map_err(|source| TrainError::Io { path: events.path().to_path_buf(), source })?;
+    evals_csv.flush()
 }
 
 #[cfg(test)]

@@ -44,7 +44,8 @@ fn a_short_laser_only_run_beats_the_random_policy() {
     let dir = std::env::temp_dir().join(format!("mdrlat-learns-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
     let (report, _) =
-        train(world.clone(), &sim, &config, &Device::flex(), &dir, false, |_| {}).expect("train");
+        train(vec![world.clone()], &sim, &config, &Device::flex(), &dir, false, |_| {})
+            .expect("train");
     let trained = report.evaluations.last().expect("an evaluation").mean();
     // Where the time went: every part of the loop took some, and the parts add up to the
     // session (less what came before the loop: set-up, the first reset).

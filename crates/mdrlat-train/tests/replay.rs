@@ -222,7 +222,7 @@ fn goals_round_trip_and_a_corrupt_goal_file_is_refused() {
     buf.write_to(&mut bytes).expect("write");
     assert_eq!(&bytes[..8], b"MDRLRB02");
     let read = |b: &[u8], goals: bool| {
-        ReplayBuffer::read_from(b, b.len() as u64, 16, 64, true, false, goals)
+        ReplayBuffer::read_from(b, b.len() as u64, 16, 64, true, false, goals, 1)
     };
     let back = read(&bytes, true).expect("read");
     for i in 0..5 {
@@ -250,4 +250,72 @@ fn goals_round_trip_and_a_corrupt_goal_file_is_refused() {
     assert_eq!(bytes.len() - old.len(), 1 + 5 * 4 * 2 * 3, "one flag byte, 24 goal bytes each");
     let e = read(&old, true).expect_err("a navigation run").to_string();
     assert!(e.contains("without goals"), "{e}");
+}
+
+/// Several environments filling one buffer in turn (`train.envs`), with episodes so short
+/// that frames are overwritten before transitions fall out by capacity: every transition
+/// still held reads exactly what its environment produced (none refers to a lost frame).
+#[test]
+fn interleaved_environments_never_read_a_lost_frame() {
+    let world = mdrlat_world::builtin::get("train").expect("builtin").expect("valid");
+    // One environment with long episodes (its stacks reach four of its steps back) beside
+    // two whose episodes end every other step (a fresh frame each time).
+    let n_envs = 3;
+    let mut envs: Vec<Env> = (0..n_envs)
+        .map(|k| {
+            let steps = if k == 0 { 40 } else { 2 };
+            let sim = SimConfig { max_episode_steps: steps, ..SimConfig::default() };
+            let mut env = Env::from_world(world.clone(), sim).expect("env");
+            env.reset(Some(10 + k as u64)).expect("reset");
+            env
+        })
+        .collect();
+    let mut buf = ReplayBuffer::new(40, 8, true, false).with_envs(n_envs);
+    let mut stacks: Vec<[FrameId; 4]> = envs
+        .iter()
+        .map(|env| {
+            let o = env.observation();
+            [buf.push_frame(o.laser.latest(), o.depth.latest()); 4]
+        })
+        .collect();
+    let mut expected: Vec<(Vec<f32>, Vec<f32>)> = Vec::new();
+    let mut rng = Rng::seed_from_u64(2);
+    for _ in 0..200 {
+        for (env, stack) in envs.iter_mut().zip(stacks.iter_mut()) {
+            let (l0, _) = stacked(env.observation());
+            let s = env.step(Action::new(rng.below(10)).expect("action")).expect("step");
+            let (l1, _) = stacked(s.observation);
+            let done = s.terminated || s.truncated;
+            let id = buf.push_frame(s.observation.laser.latest(), s.observation.depth.latest());
+            let next = [stack[1], stack[2], stack[3], id];
+            buf.push(Transition {
+                obs: *stack,
+                next,
+                action: 0,
+                reward: 0.0,
+                terminated: s.terminated,
+                odom: [0.0; 6],
+                goal: [0.0; 3],
+                next_goal: [0.0; 3],
+            });
+            expected.push((l0, l1));
+            *stack = if done {
+                env.reset(None).expect("reset");
+                let o = env.observation();
+                [buf.push_frame(o.laser.latest(), o.depth.latest()); 4]
+            } else {
+                next
+            };
+        }
+    }
+    assert!(buf.len() >= 10, "held {}", buf.len());
+    let held = &expected[expected.len() - buf.len()..];
+    let mut batch = Batch::default();
+    let all: Vec<usize> = (0..buf.len()).collect();
+    buf.write_batch(&all, &mut batch);
+    let ls = FRAME_STACK * LASER_BEAMS;
+    for (row, (l0, l1)) in held.iter().enumerate() {
+        assert!(close(&batch.laser[row * ls..(row + 1) * ls], l0, 0.6e-3 / 5.6), "s row {row}");
+        assert!(close(&batch.next_laser[row * ls..(row + 1) * ls], l1, 0.6e-3 / 5.6), "s' {row}");
+    }
 }

@@ -51,20 +51,27 @@ fn read(d: &Path, f: &str) -> String {
 fn an_interrupted_run_resumes_exactly() {
     let dev = Device::flex();
     let straight = dir("straight");
-    let (_, a) =
-        train(world(), &sim(), &config(Variant::LaserOnly, 300), &dev, &straight, false, |_| {})
-            .expect("run");
+    let (_, a) = train(
+        vec![world()],
+        &sim(),
+        &config(Variant::LaserOnly, 300),
+        &dev,
+        &straight,
+        false,
+        |_| {},
+    )
+    .expect("run");
 
     // The same run stopped at step 250 (its last checkpoint), then killed while it wrote
     // rows past the checkpoint: a resumed run must drop those rows and redo the steps.
     let cut = dir("cut");
-    train(world(), &sim(), &config(Variant::LaserOnly, 250), &dev, &cut, false, |_| {})
+    train(vec![world()], &sim(), &config(Variant::LaserOnly, 250), &dev, &cut, false, |_| {})
         .expect("run");
     let mut m = read(&cut, "metrics.csv");
     m.push_str("260,9,9,9,9,9,9,9\n270,9,9,9,9,9,9,9\n");
     std::fs::write(cut.join("metrics.csv"), m).expect("write");
     let (report, b) =
-        train(world(), &sim(), &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
+        train(vec![world()], &sim(), &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
             .expect("resume");
     assert_eq!(report.steps, 300);
     assert_eq!(probe(&a), probe(&b), "same weights");
@@ -74,15 +81,55 @@ fn an_interrupted_run_resumes_exactly() {
     // Killed after its last checkpoint (step 250 of 250) but before anyone knew it was
     // done: resuming it changes nothing, its last (partial-window) row included.
     let end = dir("end");
-    train(world(), &sim(), &config(Variant::LaserOnly, 250), &dev, &end, false, |_| {})
+    train(vec![world()], &sim(), &config(Variant::LaserOnly, 250), &dev, &end, false, |_| {})
         .expect("run");
     let before = read(&end, "metrics.csv");
     assert!(before.lines().last().is_some_and(|l| l.starts_with("250,")), "{before}");
     let (report, _) =
-        train(world(), &sim(), &config(Variant::LaserOnly, 250), &dev, &end, true, |_| {})
+        train(vec![world()], &sim(), &config(Variant::LaserOnly, 250), &dev, &end, true, |_| {})
             .expect("resume at the end");
     assert_eq!(report.steps, 250);
     assert_eq!(read(&end, "metrics.csv"), before);
+}
+
+/// Several environments over several worlds, with several gradient steps at a time, resume
+/// exactly too: every environment's world, episode and frames are in the checkpoint, which is
+/// written once a tick has stepped them all.
+#[test]
+fn several_environments_over_several_worlds_resume_exactly() {
+    let dev = Device::flex();
+    let worlds = || {
+        let mut w = mdrlat_world::load_set("example,gen-1").expect("worlds");
+        w.push(world());
+        w
+    };
+    let cfg = |steps| TrainConfig {
+        envs: 3,
+        gradient_steps: 2,
+        train_frequency: 2,
+        ..config(Variant::LaserOnly, steps)
+    };
+    let straight = dir("multi-straight");
+    let (_, a) = train(worlds(), &sim(), &cfg(300), &dev, &straight, false, |_| {}).expect("run");
+    let cut = dir("multi-cut");
+    train(worlds(), &sim(), &cfg(240), &dev, &cut, false, |_| {}).expect("run");
+    let meta = read(&cut.join("checkpoint"), "meta.json");
+    assert!(meta.contains("more_envs"), "the other environments are saved");
+    let (report, b) = train(worlds(), &sim(), &cfg(300), &dev, &cut, true, |_| {}).expect("resume");
+    assert_eq!(report.steps, 300);
+    assert_eq!(probe(&a), probe(&b), "same weights");
+    assert_eq!(read(&straight, "metrics.csv"), read(&cut, "metrics.csv"));
+    assert_eq!(read(&straight, "eval.csv"), read(&cut, "eval.csv"));
+    // 300 steps of 60-step episodes over three environments moved them between worlds.
+    assert!(report.episodes >= 3, "{} episodes", report.episodes);
+    // Another number of environments is an error naming the key.
+    let e = train(worlds(), &sim(), &TrainConfig { envs: 2, ..cfg(300) }, &dev, &cut, true, |_| {})
+        .expect_err("other envs")
+        .to_string();
+    assert!(e.contains("train.envs"), "{e}");
+    for d in [straight, cut] {
+        let _ = std::fs::remove_dir_all(d);
+    }
 }
 
 /// The navigation task resumes exactly too: the goals live in the replay buffer and the
@@ -97,20 +144,30 @@ fn a_navigation_run_resumes_exactly_and_only_as_navigation() {
         l.q_values(&Inputs { size: 1, laser, goal: vec![0.3, 0.6, 0.8], ..Inputs::default() })
     };
     let straight = dir("nav-straight");
-    let (_, a) =
-        train(world(), &nav, &config(Variant::LaserOnly, 300), &dev, &straight, false, |_| {})
-            .expect("run");
+    let (_, a) = train(
+        vec![world()],
+        &nav,
+        &config(Variant::LaserOnly, 300),
+        &dev,
+        &straight,
+        false,
+        |_| {},
+    )
+    .expect("run");
     assert_eq!(probe(&a).len(), 10);
     let replay = std::fs::read(straight.join("checkpoint/replay.bin")).expect("replay");
     assert_eq!(&replay[..8], b"MDRLRB02", "goals are stored");
     let cut = dir("nav-cut");
-    train(world(), &nav, &config(Variant::LaserOnly, 200), &dev, &cut, false, |_| {}).expect("run");
-    let e = train(world(), &sim(), &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
-        .expect_err("resumed as obstacle avoidance")
-        .to_string();
+    train(vec![world()], &nav, &config(Variant::LaserOnly, 200), &dev, &cut, false, |_| {})
+        .expect("run");
+    let e =
+        train(vec![world()], &sim(), &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
+            .expect_err("resumed as obstacle avoidance")
+            .to_string();
     assert!(e.contains("nav") && e.contains("meta.json"), "{e}");
-    let (_, b) = train(world(), &nav, &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
-        .expect("resume");
+    let (_, b) =
+        train(vec![world()], &nav, &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
+            .expect("resume");
     assert_eq!(probe(&a), probe(&b), "same weights");
     assert_eq!(read(&straight, "metrics.csv"), read(&cut, "metrics.csv"));
     assert_eq!(read(&straight, "eval.csv"), read(&cut, "eval.csv"));
@@ -123,9 +180,10 @@ fn a_navigation_run_resumes_exactly_and_only_as_navigation() {
 fn bad_checkpoints_are_clear_errors_never_a_fresh_start() {
     let dev = Device::flex();
     let run = dir("bad");
-    train(world(), &sim(), &config(Variant::LaserOnly, 100), &dev, &run, false, |_| {})
+    train(vec![world()], &sim(), &config(Variant::LaserOnly, 100), &dev, &run, false, |_| {})
         .expect("run");
-    let resume = |variant| train(world(), &sim(), &config(variant, 200), &dev, &run, true, |_| {});
+    let resume =
+        |variant| train(vec![world()], &sim(), &config(variant, 200), &dev, &run, true, |_| {});
     let e = resume(Variant::Mdrlat).expect_err("other variant").to_string();
     assert!(e.contains("laser-only") && e.contains("mdrlat"), "{e}");
     // Truncate the replay file.
@@ -149,8 +207,9 @@ fn bad_checkpoints_are_clear_errors_never_a_fresh_start() {
     let e = resume(Variant::LaserOnly).expect_err("meta").to_string();
     assert!(e.contains("meta.json") && e.contains("corrupt"), "{e}");
     let empty = dir("empty");
-    let e = train(world(), &sim(), &config(Variant::LaserOnly, 200), &dev, &empty, true, |_| {})
-        .expect_err("none");
+    let e =
+        train(vec![world()], &sim(), &config(Variant::LaserOnly, 200), &dev, &empty, true, |_| {})
+            .expect_err("none");
     assert!(e.to_string().contains("no checkpoint"), "{e}");
 }
 
@@ -163,8 +222,9 @@ fn two_runs_with_one_seed_write_the_same_file_bytes() {
     let runs: Vec<PathBuf> = ["same-a", "same-b"].iter().map(|n| dir(n)).collect();
     let mut learners = Vec::new();
     for d in &runs {
-        let (_, l) = train(world(), &sim(), &config(Variant::MultiAt, 120), &dev, d, false, |_| {})
-            .expect("run");
+        let (_, l) =
+            train(vec![world()], &sim(), &config(Variant::MultiAt, 120), &dev, d, false, |_| {})
+                .expect("run");
         mdrlat_train::export::save_safetensors(
             &l.policy_net(),
             l.net_config(),
@@ -199,7 +259,7 @@ fn learning_curves_measure_the_training_world_and_an_unseen_one() {
     let dev = Device::flex();
     let curves = |c: TrainConfig, name: &str| -> Vec<Vec<String>> {
         let d = dir(name);
-        let (report, _) = train(world(), &sim(), &c, &dev, &d, false, |_| {}).expect("run");
+        let (report, _) = train(vec![world()], &sim(), &c, &dev, &d, false, |_| {}).expect("run");
         let text = read(&d, "eval.csv");
         let mut lines = text.lines();
         let header = lines.next().expect("header");
@@ -227,7 +287,7 @@ fn learning_curves_measure_the_training_world_and_an_unseen_one() {
     let rows = curves(TrainConfig { curve_episodes: 0, ..base.clone() }, "no-curves");
     assert!(rows[0][6..].iter().all(String::is_empty), "{:?}", rows[0]);
     let e = train(
-        world(),
+        vec![world()],
         &sim(),
         &TrainConfig { curve_world: "nowhere".into(), ..base },
         &dev,

@@ -16,4 +16,4 @@ mod world;
 pub use error::WorldError;
 pub use format::FORMAT_VERSION;
 pub use generate::{generate, generate_toml};
-pub use world::{Obstacle, PedestrianSpec, World, load};
+pub use world::{Obstacle, PedestrianSpec, World, load, load_set};

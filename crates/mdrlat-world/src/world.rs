@@ -322,9 +322,58 @@ pub fn load(spec: &str) -> Result<World, WorldError> {
     World::from_toml(spec, &text)
 }
 
+/// Several worlds from one spec: comma-separated [`load`] specs, where `gen-A..B` stands
+/// for the generated worlds `gen-A` to `gen-(B−1)` (`gen-0..64`: 64 worlds). A spec without
+/// a comma or a range is one world, as [`load`] reads it.
+///
+/// # Errors
+/// An empty spec or range, a range of more than 10,000 worlds, or any world's error.
+pub fn load_set(spec: &str) -> Result<Vec<World>, WorldError> {
+    let bad = |problem: String| WorldError::invalid(spec, "world list", problem);
+    let mut worlds = Vec::new();
+    for part in spec.split(',').map(str::trim) {
+        if part.is_empty() {
+            return Err(bad("an empty name (two commas, or one at an end)".into()));
+        }
+        let range = part.strip_prefix("gen-").and_then(|r| r.split_once(".."));
+        let Some((a, b)) = range else {
+            worlds.push(load(part)?);
+            continue;
+        };
+        let (Ok(a), Ok(b)) = (a.parse::<u64>(), b.parse::<u64>()) else {
+            return Err(bad(format!("'{part}': expected gen-A..B with whole numbers A < B")));
+        };
+        if a >= b || b - a > 10_000 {
+            return Err(bad(format!("'{part}': expected A < B and at most 10,000 worlds")));
+        }
+        for seed in a..b {
+            worlds.push(crate::generate(seed)?);
+        }
+    }
+    Ok(worlds)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn world_sets_list_and_range() {
+        let names = |spec: &str| -> Vec<String> {
+            load_set(spec).expect(spec).into_iter().map(|w| w.name).collect()
+        };
+        assert_eq!(names("office"), ["office"]);
+        let set = names("train, gen-3..5,office");
+        assert_eq!(set.len(), 4, "{set:?}");
+        assert_eq!(set[0], "train");
+        assert_eq!(set[1], crate::generate(3).expect("gen").name);
+        for bad in ["", "office,", "gen-5..5", "gen-2..x", "nowhere,office"] {
+            let e = load_set(bad).expect_err(bad).to_string();
+            assert!(!e.is_empty(), "{bad}");
+        }
+        let e = load_set("gen-9..2").expect_err("reversed").to_string();
+        assert!(e.contains("gen-9..2") && e.contains("A < B"), "{e}");
+    }
 
     const OK: &str = r#"
 version = 1

@@ -1,7 +1,7 @@
 //! `mdrlat train`: one training run of Algorithm 1 into a run directory.
 
-use super::{TaskArgs, ensure_dir, load_world};
-use crate::config::Config;
+use super::{TaskArgs, ensure_dir};
+use crate::config::{Config, Preset};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use mdrlat_nn::Variant;
@@ -63,10 +63,15 @@ pub struct Args {
     /// (default: the config's, mdrlat).
     #[arg(long)]
     variant: Option<Variant>,
-    /// World to train in: a built-in name, a .toml world file or a map_server .yaml
-    /// (default: train; nav-train for --task nav).
+    /// World(s) to train in: a built-in name, a .toml world file, a map_server .yaml, a
+    /// generated world gen-N, or several, comma-separated, with gen-A..B for gen-A to
+    /// gen-(B-1) (default: train, gen-0..64 with --preset fast; nav-train for --task nav)
     #[arg(long)]
     world: Option<String>,
+    /// Settings to start from, below --config and --set: paper (the defaults) or fast
+    /// (mdrlat's own recipe, configs/fast.toml)
+    #[arg(long, value_enum, default_value = "paper")]
+    preset: Preset,
     #[command(flatten)]
     task: TaskArgs,
     /// Environment steps (default: the config's, 400,000).
@@ -80,7 +85,7 @@ pub struct Args {
     out: Option<PathBuf>,
     /// Continue the run in this directory exactly from its last checkpoint (its saved
     /// config and world; `--steps` may extend it).
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["variant", "world", "seed", "config", "sets", "device", "task", "start", "goal"])]
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["variant", "world", "seed", "config", "sets", "device", "task", "start", "goal", "preset"])]
     resume: Option<PathBuf>,
     /// Configuration file (see `mdrlat config default`).
     #[arg(long)]
@@ -143,7 +148,7 @@ pub fn run(a: &Args) -> Result<()> {
         }
         None => {
             let dir = a.out.clone().context("--out is required")?;
-            let mut config = Config::resolve(a.config.as_deref(), &a.sets)?;
+            let mut config = Config::resolve_preset(a.preset, a.config.as_deref(), &a.sets)?;
             if let Some(v) = a.variant {
                 config.train.variant = v;
             }
@@ -157,7 +162,7 @@ pub fn run(a: &Args) -> Result<()> {
             config.sim.validate()?;
             config.train.validate()?;
             let device = a.device.unwrap_or(DeviceKind::Cpu);
-            let default_world = if config.sim.task == Task::Nav { "nav-train" } else { "train" };
+            let default_world = a.preset.default_world(config.sim.task);
             let info = RunInfo {
                 world: a.world.clone().unwrap_or_else(|| default_world.into()),
                 device: device.name(),
@@ -166,7 +171,7 @@ pub fn run(a: &Args) -> Result<()> {
             (dir, config, info, false)
         }
     };
-    let world = load_world(&info.world)?;
+    let worlds = mdrlat_world::load_set(&info.world)?;
     let device = {
         use clap::ValueEnum;
         DeviceKind::from_str(&info.device, true).map_err(|_| {
@@ -206,7 +211,7 @@ pub fn run(a: &Args) -> Result<()> {
         }
     };
     let (report, learner) = mdrlat_train::train(
-        world,
+        worlds,
         &config.sim,
         &config.train,
         &device.device(),
