@@ -86,6 +86,10 @@ pub struct Meta {
     pub window: Window,
     /// The training environment (the first, with `train.envs` > 1).
     pub env: EnvState,
+    /// The first environment's steps whose n-step transitions are not stored yet, oldest
+    /// first (`train.n_step` > 1).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pending: Vec<PendingStep>,
     /// Which training world the first environment is in (an index into the run's worlds;
     /// absent with one world).
     #[serde(default, skip_serializing_if = "is_zero")]
@@ -112,6 +116,25 @@ pub struct EnvSlot {
     pub stack: [FrameId; 4],
     /// Its state.
     pub env: EnvState,
+    /// Its steps whose n-step transitions are not stored yet, oldest first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pending: Vec<PendingStep>,
+}
+
+/// An environment step whose n-step transition waits for the steps after it
+/// (`train.n_step`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PendingStep {
+    /// Frames of its observation.
+    pub obs: [FrameId; 4],
+    /// The action taken.
+    pub action: u8,
+    /// Its reward.
+    pub reward: f32,
+    /// Its observation's odometry (the auxiliary task's target).
+    pub odom: [f32; 6],
+    /// Its observation's goal.
+    pub goal: [f32; 3],
 }
 
 fn is_zero(n: &usize) -> bool {
@@ -297,13 +320,16 @@ pub fn load(
         v.uses_laser(),
         v.uses_depth(),
         task == Task::Nav,
-        config.envs,
+        (config.envs, config.n_step as usize),
     )
     .map_err(|e| bad(&replay_path, e.to_string()))?;
     if r.hash != meta.replay_checksum {
         return Err(bad(&replay_path, "checksum mismatch: the file is corrupt"));
     }
-    let stacks = std::iter::once(&meta.stack).chain(meta.more_envs.iter().map(|s| &s.stack));
+    let stacks = std::iter::once(&meta.stack)
+        .chain(meta.more_envs.iter().map(|s| &s.stack))
+        .chain(meta.pending.iter().map(|p| &p.obs))
+        .chain(meta.more_envs.iter().flat_map(|s| s.pending.iter().map(|p| &p.obs)));
     if !stacks.flatten().all(|&id| replay.holds_frame(id)) {
         return Err(bad(
             &meta_path,

@@ -16,6 +16,10 @@ pub struct TrainConfig {
     pub seed: u64,
     /// Discount factor γ.
     pub gamma: f32,
+    /// Steps of the returns the TD target bootstraps from (paper: 1): a stored transition
+    /// carries `Σ_{i<n} γ^i r_{t+i}` and `s_{t+n}`, bootstrapped with `γ^n` (fewer steps at an
+    /// episode's end). Up to 16.
+    pub n_step: u32,
     /// Adam learning rate for the TD and auxiliary losses.
     pub learning_rate: f64,
     /// Adam ε (TensorFlow's default, as the authors' code).
@@ -89,6 +93,7 @@ impl Default for TrainConfig {
             total_steps: 400_000,
             seed: 0,
             gamma: 0.99,
+            n_step: 1,
             learning_rate: 1e-4,
             adam_epsilon: 1e-8,
             batch_size: 32,
@@ -230,6 +235,9 @@ impl TrainConfig {
             if !(0.0..=1.0).contains(&v) {
                 return err(field, format!("must be in [0, 1], got {v}"));
             }
+        }
+        if self.n_step == 0 || self.n_step > 16 {
+            return err("train.n_step", format!("must be in 1..=16, got {}", self.n_step));
         }
         if self.gradient_steps == 0 || self.gradient_steps > 64 {
             return err(

@@ -73,8 +73,9 @@ fn batch_inputs(batch: &Batch, next: bool) -> HostInputs<'_> {
     HostInputs { batch: batch.size, laser, depth, goal }
 }
 
-/// Eq. (10) on host rows: `y = r + (1 − terminated) · Q⁻(s', argmax_a' Q(s', a')) · γ`, in
-/// burn's order of operations; ties go to the first action.
+/// Eq. (10) on host rows: `y = r + (1 − terminated) · Q⁻(s', argmax_a' Q(s', a')) · γ`
+/// (`γ^steps` for n-step returns), in burn's order of operations; ties go to the first
+/// action.
 fn host_targets(online_next: &[f32], target_next: &[f32], batch: &Batch, gamma: f32) -> Vec<f32> {
     let actions = online_next.len() / batch.size.max(1);
     (0..batch.size)
@@ -82,7 +83,7 @@ fn host_targets(online_next: &[f32], target_next: &[f32], batch: &Batch, gamma: 
             let row = &online_next[i * actions..(i + 1) * actions];
             let best = (0..actions).fold(0, |best, a| if row[a] > row[best] { a } else { best });
             let q_next = target_next[i * actions + best];
-            batch.rewards[i] + ((1.0 - batch.terminated[i]) * q_next) * gamma
+            batch.rewards[i] + ((1.0 - batch.terminated[i]) * q_next) * discount(gamma, batch, i)
         })
         .collect()
 }
@@ -289,6 +290,14 @@ fn in_name_order(path: &Path) -> Result<(), String> {
         writer = writer.with_scalar(&key, value);
     }
     writer.write_to_file(path).map_err(|e| e.to_string())
+}
+
+/// `γ^steps` of row `i` (γ itself for one step, and for batches made without steps).
+fn discount(gamma: f32, batch: &Batch, i: usize) -> f32 {
+    match batch.steps.get(i) {
+        Some(&k) if k > 1 => gamma.powi(i32::from(k)),
+        _ => gamma,
+    }
 }
 
 /// The TD loss's Adam state in a checkpoint (both losses' with one optimiser).
@@ -514,7 +523,13 @@ impl Learner {
             Tensor::<2>::from_data(TensorData::new(batch.rewards.clone(), [b, 1]), &self.device);
         let alive: Vec<f32> = batch.terminated.iter().map(|t| 1.0 - t).collect();
         let alive = Tensor::<2>::from_data(TensorData::new(alive, [b, 1]), &self.device);
-        rewards + alive * q_next * self.gamma
+        if batch.steps.iter().all(|&k| k <= 1) {
+            return rewards + alive * q_next * self.gamma;
+        }
+        // n-step returns: each row's bootstrap discounted by γ^steps.
+        let discounts: Vec<f32> = (0..b).map(|i| discount(self.gamma, batch, i)).collect();
+        let discounts = Tensor::<2>::from_data(TensorData::new(discounts, [b, 1]), &self.device);
+        rewards + alive * q_next * discounts
     }
 
     /// The TD targets `y` of a batch (eq. 10), for tests and diagnostics.
@@ -990,6 +1005,7 @@ mod tests {
         for t in 0..n {
             let stack = |s: usize| std::array::from_fn(|k| ids[s + k]);
             replay.push(Transition {
+                steps: 1,
                 obs: stack(t),
                 next: stack(t + 1),
                 action: (t % 10) as u8,

@@ -28,11 +28,14 @@ pub struct Transition {
     pub next: [FrameId; FRAME_STACK],
     /// Action index.
     pub action: u8,
-    /// Reward.
+    /// Reward: with `steps` > 1 the discounted sum `Σ γ^i r_{t+i}` of those steps' rewards.
     pub reward: f32,
     /// A collision, or in navigation the arrival at the goal, ended the episode (only this
     /// zeroes the bootstrap; a time limit does not).
     pub terminated: bool,
+    /// Environment steps from `s_t` to the stored `s'` (`train.n_step`; 1 in the paper, fewer
+    /// than `n_step` at an episode's end): the bootstrap is discounted by `γ^steps`.
+    pub steps: u8,
     /// True `(v, ω)` at `t−2, t−1, t` of `s_t`: the auxiliary task's target.
     pub odom: [f32; 2 * ODOM_HISTORY],
     /// The goal of `s_t` in the robot frame (`mdrlat_core::goal_in_robot_frame`, metres;
@@ -67,6 +70,8 @@ pub struct Batch {
     pub rewards: Vec<f32>,
     /// `[B]` 1.0 where terminated.
     pub terminated: Vec<f32>,
+    /// `[B]` environment steps from `s` to `s'` (see [`Transition::steps`]).
+    pub steps: Vec<u8>,
     /// `[B, 6]` auxiliary targets.
     pub odom: Vec<f32>,
     /// `[B, 3]` normalised goal of `s_t` (`mdrlat_core::normalize_goal`; empty without goals).
@@ -211,11 +216,13 @@ impl ReplayBuffer {
     /// arrive with their oldest frames in order, so dropping transitions from the front
     /// until the front's frames are live drops every transition with an overwritten frame.
     /// Interleaved, a later transition's oldest frame may precede the front's by up to four
-    /// of its environment's steps — at most two frames each (a step's and a reset's) from
-    /// every environment: the front goes while its oldest frame is within that margin of
-    /// the overwritten one, so no held transition refers to a lost frame.
-    pub fn with_envs(mut self, envs: usize) -> Self {
-        self.frame_margin = if envs > 1 { (2 * FRAME_STACK * envs) as u64 } else { 0 };
+    /// of its environment's steps (`3 + n_step` with n-step returns, whose `s` is `n_step`
+    /// steps old when stored) — at most two frames each (a step's and a reset's) from every
+    /// environment: the front goes while its oldest frame is within that margin of the
+    /// overwritten one, so no held transition refers to a lost frame.
+    pub fn with_envs(mut self, envs: usize, n_step: usize) -> Self {
+        let ticks = FRAME_STACK + n_step.max(1) - 1;
+        self.frame_margin = if envs > 1 { (2 * ticks * envs) as u64 } else { 0 };
         self
     }
 
@@ -393,6 +400,7 @@ impl ReplayBuffer {
         out.actions.clear();
         out.rewards.clear();
         out.terminated.clear();
+        out.steps.clear();
         out.odom.clear();
         out.goal.clear();
         out.next_goal.clear();
@@ -412,6 +420,7 @@ impl ReplayBuffer {
             out.actions.push(i64::from(t.action));
             out.rewards.push(t.reward);
             out.terminated.push(if t.terminated { 1.0 } else { 0.0 });
+            out.steps.push(t.steps);
             out.odom.extend_from_slice(&t.odom);
             if self.keep_goal {
                 out.goal.extend_from_slice(&normalize_goal(&t.goal));
@@ -508,7 +517,9 @@ impl ReplayBuffer {
             }
             bytes.push(t.action);
             bytes.extend_from_slice(&t.reward.to_le_bytes());
-            bytes.push(u8::from(t.terminated));
+            // Bit 0: terminated; bits 1–7: steps − 1 (0 for one step: the byte of files
+            // written before n-step returns).
+            bytes.push(u8::from(t.terminated) | (t.steps.saturating_sub(1) << 1));
             for o in t.odom {
                 bytes.extend_from_slice(&o.to_le_bytes());
             }
@@ -524,7 +535,7 @@ impl ReplayBuffer {
 
     /// Reads a buffer written by [`ReplayBuffer::write_to`]; it must have the given capacity
     /// and sensors, and store goals exactly when `keep_goal`; `envs` environments filled it
-    /// (see [`ReplayBuffer::with_envs`]).
+    /// with `n_step` returns (see [`ReplayBuffer::with_envs`]).
     ///
     /// # Errors
     /// A read error, a truncated or foreign file, or a buffer of another shape.
@@ -537,7 +548,7 @@ impl ReplayBuffer {
         keep_laser: bool,
         keep_depth: bool,
         keep_goal: bool,
-        envs: usize,
+        (envs, n_step): (usize, usize),
     ) -> std::io::Result<Self> {
         let mut magic = [0u8; 8];
         r.read_exact(&mut magic)?;
@@ -595,7 +606,7 @@ impl ReplayBuffer {
         }
         let mut buf = ReplayBuffer::new(capacity, (slots - cap) as usize, keep_laser, keep_depth)
             .with_goals(goals)
-            .with_envs(envs);
+            .with_envs(envs, n_step);
         if buf.frame_slots as u64 != slots {
             return Err(io_err("replay frame reserve too small".into()));
         }
@@ -623,7 +634,8 @@ impl ReplayBuffer {
                 next: [id(4), id(5), id(6), id(7)],
                 action: b[base],
                 reward: f32_at(base + 1),
-                terminated: b[base + 5] == 1,
+                terminated: b[base + 5] & 1 == 1,
+                steps: (b[base + 5] >> 1) + 1,
                 odom: std::array::from_fn(|k| f32_at(base + 6 + 4 * k)),
                 goal: std::array::from_fn(|k| if goals { f32_at(goal_at(k)) } else { 0.0 }),
                 next_goal: std::array::from_fn(|k| {
@@ -635,7 +647,9 @@ impl ReplayBuffer {
                 .transitions
                 .back()
                 .is_none_or(|p| p.oldest_frame() <= t.oldest_frame() + buf.frame_margin);
-            let chained = t.next[..FRAME_STACK - 1] == t.obs[1..];
+            // s' is s moved on by `steps` frames (none shared after four).
+            let k = usize::from(t.steps);
+            let chained = k >= FRAME_STACK || t.next[..FRAME_STACK - k] == t.obs[k..];
             if !buf.is_live(&t) || t.action as usize >= 10 || !in_order || !chained {
                 return Err(io_err(
                     "replay transitions are out of order or refer to frames the file does not hold"

@@ -2,7 +2,7 @@
 //! final weights. It reads top to bottom like the algorithm; `// Algorithm 1, line N` marks
 //! each step.
 
-use crate::checkpoint::{self, Meta, Window, frame_reserve};
+use crate::checkpoint::{self, Meta, PendingStep, Window, frame_reserve};
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner, Losses};
 use crate::policy::observation_inputs;
@@ -385,6 +385,8 @@ struct Slot {
     episode_reward: f32,
     episode_length: u32,
     stack: [FrameId; FRAME_STACK],
+    /// Steps whose n-step transitions wait for the steps after them.
+    pending: std::collections::VecDeque<PendingStep>,
 }
 
 /// Trains `config.variant` in `worlds` (at least one; with several, the environments move
@@ -424,7 +426,7 @@ pub fn train(
     }
     let scenes: Vec<Arc<StaticScene>> =
         worlds.into_iter().map(|w| Arc::new(StaticScene::new(Arc::new(w), sim))).collect();
-    let n_envs = config.envs;
+    let (n_envs, n_step) = (config.envs, config.n_step as usize);
     // One environment per evaluation episode, stepped on this thread, the network deciding
     // for all of them at once.
     let slots = config.eval_episodes.min(32) as usize;
@@ -454,6 +456,7 @@ pub fn train(
             episode_length: run.episode_length,
             stack: run.stack,
             env: run.env.clone(),
+            pending: run.pending.clone(),
         };
         let mut envs = Vec::with_capacity(n_envs);
         for saved in std::iter::once(&first).chain(&run.more_envs) {
@@ -465,6 +468,7 @@ pub fn train(
                 episode_reward: saved.episode_reward,
                 episode_length: saved.episode_length,
                 stack: saved.stack,
+                pending: saved.pending.iter().copied().collect(),
             });
         }
         // A partial-window row at the checkpoint step is written again, complete — unless
@@ -488,7 +492,7 @@ pub fn train(
             variant.uses_depth(),
         )
         .with_goals(nav)
-        .with_envs(n_envs);
+        .with_envs(n_envs, config.n_step as usize);
         let mut envs = Vec::with_capacity(n_envs);
         for k in 0..n_envs {
             let world = k % scenes.len();
@@ -496,7 +500,8 @@ pub fn train(
             env.reset_stream(config.seed, k as u64)?;
             let first = push_latest(&mut replay, env.observation());
             let stack = [first; FRAME_STACK];
-            envs.push(Slot { env, world, episode_reward: 0.0, episode_length: 0, stack });
+            let pending = std::collections::VecDeque::new();
+            envs.push(Slot { env, world, episode_reward: 0.0, episode_length: 0, stack, pending });
         }
         let run = Meta {
             format: checkpoint::CHECKPOINT_FORMAT,
@@ -513,6 +518,7 @@ pub fn train(
             sample_rng: Rng::derive(config.seed, 102),
             window: Window::default(),
             env: envs[0].env.state(),
+            pending: Vec::new(),
             world: 0,
             more_envs: Vec::new(),
             replay_bytes: 0,
@@ -583,20 +589,36 @@ pub fn train(
             let (reward, terminated, done) = (s.reward, s.terminated, s.terminated || s.truncated);
             // Line 5: store (s_k, a_k, r_k, s_{k+1}); s_{k+1} is the true final observation at
             // an episode's end, and only a collision or the goal (terminated) marks it
-            // terminal.
+            // terminal. With n-step returns, (s_k, a_k, Σ γ^i r_{k+i}, s_{k+n}) once the n-th
+            // step is done, and every waiting step at an episode's end.
             let newest = push_latest(&mut replay, s.observation);
             let stack = slot.stack;
             let next = [stack[1], stack[2], stack[3], newest];
-            replay.push(Transition {
-                obs: stack,
-                next,
-                action: action as u8,
-                reward,
-                terminated,
-                odom,
-                goal,
-                next_goal: goal_of(s.observation),
-            });
+            let next_goal = goal_of(s.observation);
+            let step = PendingStep { obs: stack, action: action as u8, reward, odom, goal };
+            slot.pending.push_back(step);
+            let ready = if done { slot.pending.len() } else { slot.pending.len() / n_step };
+            for _ in 0..ready {
+                let steps = slot.pending.len();
+                let ret = slot
+                    .pending
+                    .iter()
+                    .rev()
+                    .map(|p| p.reward)
+                    .reduce(|later, r| r + config.gamma * later);
+                let Some(first) = slot.pending.pop_front() else { break };
+                replay.push(Transition {
+                    obs: first.obs,
+                    next,
+                    action: first.action,
+                    reward: ret.unwrap_or(first.reward),
+                    terminated,
+                    steps: steps as u8,
+                    odom: first.odom,
+                    goal: first.goal,
+                    next_goal,
+                });
+            }
             slot.episode_reward += reward;
             slot.episode_length += 1;
             if done {
@@ -620,7 +642,9 @@ pub fn train(
             timing.storing += lap.split();
 
             // Lines 6–15: gradient steps on random batches.
-            if replay.len() as u64 >= config.learning_starts && t.is_multiple_of(config.train_frequency) {
+            if replay.len() as u64 >= config.learning_starts
+                && t.is_multiple_of(config.train_frequency)
+            {
                 for _ in 0..config.gradient_steps {
                     let idx = replay.sample_indices(config.batch_size, &mut run.sample_rng);
                     replay.write_batch_as(&idx, &mut batch, learner.depth_layout());
@@ -686,7 +710,8 @@ pub fn train(
             // A checkpoint every interval and at the end (so a finished run can be
             // extended), written once the tick is done: every environment then stands after
             // its step.
-            checkpoint_due |= t.is_multiple_of(config.checkpoint_interval) || t == config.total_steps;
+            checkpoint_due |=
+                t.is_multiple_of(config.checkpoint_interval) || t == config.total_steps;
             status.step = t;
             status.epsilon = epsilon;
             status.episodes = run.episodes;
@@ -702,6 +727,7 @@ pub fn train(
             run.updates = learner.updates();
             let [first, rest @ ..] = envs.as_slice() else { unreachable!("train.envs >= 1") };
             (run.env, run.world, run.stack) = (first.env.state(), first.world, first.stack);
+            run.pending = first.pending.iter().copied().collect();
             (run.episode_reward, run.episode_length) = (first.episode_reward, first.episode_length);
             run.more_envs = rest
                 .iter()
@@ -711,6 +737,7 @@ pub fn train(
                     episode_length: s.episode_length,
                     stack: s.stack,
                     env: s.env.state(),
+                    pending: s.pending.iter().copied().collect(),
                 })
                 .collect();
             checkpoint::save(dir, &mut run, &learner, &replay)?;

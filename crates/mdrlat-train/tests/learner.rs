@@ -66,6 +66,34 @@ fn only_termination_zeroes_the_bootstrap_and_the_online_net_picks() {
     }
 }
 
+/// n-step transitions bootstrap with γ^steps, on the host kernels and on burn's autodiff.
+#[test]
+fn n_step_targets_discount_by_gamma_to_the_steps() {
+    for host in [true, false] {
+        let cfg = TrainConfig { variant: Variant::LaserOnly, ..TrainConfig::default() };
+        let mut learner = Learner::new(&cfg, Task::Avoid, &Device::flex());
+        learner.set_host_kernels(host);
+        let mut rng = Rng::seed_from_u64(6);
+        let mut b = batch(4, &[0.0, 0.0, 1.0, 0.0], &mut rng, false);
+        b.steps = vec![1, 3, 3, 5];
+        let y = learner.td_targets(&b);
+        let q_target = learner.target_q_next(&b);
+        let next =
+            mdrlat_train::Inputs { size: 4, laser: b.next_laser.clone(), ..Default::default() };
+        let greedy = learner.greedy(&next).expect("finite Q-values");
+        for row in 0..4 {
+            let discount = 0.99f32.powi(i32::from(b.steps[row]));
+            let bootstrap = if b.terminated[row] == 1.0 { 0.0 } else { discount };
+            let expect = b.rewards[row] + bootstrap * q_target[row * 10 + greedy[row].index()];
+            assert!(
+                (y[row] - expect).abs() < 1e-5,
+                "host {host} row {row}: {} vs {expect}",
+                y[row]
+            );
+        }
+    }
+}
+
 #[test]
 fn gradient_steps_reduce_the_losses_on_a_fixed_batch() {
     for variant in [Variant::LaserOnly, Variant::MultiAt] {

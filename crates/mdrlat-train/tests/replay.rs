@@ -57,6 +57,7 @@ fn sampled_transitions_equal(keep_laser: bool, keep_depth: bool) {
         let id = buf.push_frame(s.observation.laser.latest(), s.observation.depth.latest());
         let next = [stack[1], stack[2], stack[3], id];
         buf.push(Transition {
+            steps: 1,
             obs: stack,
             next,
             action: a as u8,
@@ -175,6 +176,7 @@ fn short_episodes_still_fill_the_buffer() {
             let id = buf.push_frame(&laser, &[]);
             let next = [stack[1], stack[2], stack[3], id];
             buf.push(Transition {
+                steps: 1,
                 obs: stack,
                 next,
                 action: 0,
@@ -201,6 +203,7 @@ fn small_buffer(n: usize, goals: bool) -> ReplayBuffer {
         let next = [stack[1], stack[2], stack[3], id];
         let g = k as f32;
         buf.push(Transition {
+            steps: 1,
             obs: stack,
             next,
             action: (k % 10) as u8,
@@ -222,7 +225,7 @@ fn goals_round_trip_and_a_corrupt_goal_file_is_refused() {
     buf.write_to(&mut bytes).expect("write");
     assert_eq!(&bytes[..8], b"MDRLRB02");
     let read = |b: &[u8], goals: bool| {
-        ReplayBuffer::read_from(b, b.len() as u64, 16, 64, true, false, goals, 1)
+        ReplayBuffer::read_from(b, b.len() as u64, 16, 64, true, false, goals, (1, 1))
     };
     let back = read(&bytes, true).expect("read");
     for i in 0..5 {
@@ -270,7 +273,7 @@ fn interleaved_environments_never_read_a_lost_frame() {
             env
         })
         .collect();
-    let mut buf = ReplayBuffer::new(40, 8, true, false).with_envs(n_envs);
+    let mut buf = ReplayBuffer::new(40, 8, true, false).with_envs(n_envs, 1);
     let mut stacks: Vec<[FrameId; 4]> = envs
         .iter()
         .map(|env| {
@@ -289,6 +292,7 @@ fn interleaved_environments_never_read_a_lost_frame() {
             let id = buf.push_frame(s.observation.laser.latest(), s.observation.depth.latest());
             let next = [stack[1], stack[2], stack[3], id];
             buf.push(Transition {
+                steps: 1,
                 obs: *stack,
                 next,
                 action: 0,

@@ -38,6 +38,18 @@ fn world() -> mdrlat_world::World {
     mdrlat_world::builtin::get("example").expect("builtin").expect("valid")
 }
 
+/// A laser-only run of [`config`] in `world`.
+fn laser_only(
+    world: mdrlat_world::World,
+    sim: &SimConfig,
+    steps: u64,
+    dir: &Path,
+    resume: bool,
+) -> Result<(mdrlat_train::TrainReport, mdrlat_train::Learner), mdrlat_train::TrainError> {
+    let cfg = config(Variant::LaserOnly, steps);
+    train(vec![world], sim, &cfg, &Device::flex(), dir, resume, |_| {})
+}
+
 fn probe(learner: &mdrlat_train::Learner) -> Vec<f32> {
     let laser: Vec<f32> = (0..4 * 512).map(|i| (i % 97) as f32 / 97.0).collect();
     learner.q_values(&Inputs { size: 1, laser, ..Inputs::default() })
@@ -51,16 +63,7 @@ fn read(d: &Path, f: &str) -> String {
 fn an_interrupted_run_resumes_exactly() {
     let dev = Device::flex();
     let straight = dir("straight");
-    let (_, a) = train(
-        vec![world()],
-        &sim(),
-        &config(Variant::LaserOnly, 300),
-        &dev,
-        &straight,
-        false,
-        |_| {},
-    )
-    .expect("run");
+    let (_, a) = laser_only(world(), &sim(), 300, &straight, false).expect("run");
 
     // The same run stopped at step 250 (its last checkpoint), then killed while it wrote
     // rows past the checkpoint: a resumed run must drop those rows and redo the steps.
@@ -92,9 +95,9 @@ fn an_interrupted_run_resumes_exactly() {
     assert_eq!(read(&end, "metrics.csv"), before);
 }
 
-/// Several environments over several worlds, with several gradient steps at a time, resume
-/// exactly too: every environment's world, episode and frames are in the checkpoint, which is
-/// written once a tick has stepped them all.
+/// Several environments over several worlds, with several gradient steps at a time and
+/// 3-step returns, resume exactly too: every environment's world, episode, frames and waiting
+/// steps are in the checkpoint, which is written once a tick has stepped them all.
 #[test]
 fn several_environments_over_several_worlds_resume_exactly() {
     let dev = Device::flex();
@@ -107,6 +110,7 @@ fn several_environments_over_several_worlds_resume_exactly() {
         envs: 3,
         gradient_steps: 2,
         train_frequency: 2,
+        n_step: 3,
         ..config(Variant::LaserOnly, steps)
     };
     let straight = dir("multi-straight");
@@ -144,16 +148,7 @@ fn a_navigation_run_resumes_exactly_and_only_as_navigation() {
         l.q_values(&Inputs { size: 1, laser, goal: vec![0.3, 0.6, 0.8], ..Inputs::default() })
     };
     let straight = dir("nav-straight");
-    let (_, a) = train(
-        vec![world()],
-        &nav,
-        &config(Variant::LaserOnly, 300),
-        &dev,
-        &straight,
-        false,
-        |_| {},
-    )
-    .expect("run");
+    let (_, a) = laser_only(world(), &nav, 300, &straight, false).expect("run");
     assert_eq!(probe(&a).len(), 10);
     let replay = std::fs::read(straight.join("checkpoint/replay.bin")).expect("replay");
     assert_eq!(&replay[..8], b"MDRLRB02", "goals are stored");
@@ -298,4 +293,63 @@ fn learning_curves_measure_the_training_world_and_an_unseen_one() {
     .map(|_| ())
     .expect_err("unknown world");
     assert!(e.to_string().contains("train.curve_world 'nowhere'"), "{e}");
+}
+
+/// n-step returns store what the one-step transitions of the same trajectory add up to:
+/// `Σ_{i<k} γ^i r_{t+i}` and the frames of `s_{t+k}`, k = n, or fewer where the episode ended
+/// (terminated only where it ended in a collision). Actions are all random here, so runs with
+/// n = 1 and n = 3 drive the same trajectory and push the same frames.
+#[test]
+fn n_step_transitions_add_up_the_one_step_ones() {
+    let replay_of = |n_step, name: &str| {
+        let cfg = TrainConfig {
+            n_step,
+            epsilon_start: 1.0,
+            epsilon_end: 1.0,
+            replay_capacity: 400,
+            learning_starts: 150,
+            ..config(Variant::LaserOnly, 200)
+        };
+        let d = dir(name);
+        train(vec![world()], &sim(), &cfg, &Device::flex(), &d, false, |_| {}).expect("run");
+        let path = d.join("checkpoint/replay.bin");
+        let bytes = std::fs::read(&path).expect("replay");
+        let r = mdrlat_train::ReplayBuffer::read_from(
+            &bytes[..],
+            bytes.len() as u64,
+            400,
+            mdrlat_train::checkpoint::frame_reserve(400),
+            true,
+            false,
+            false,
+            (1, n_step as usize),
+        )
+        .expect("reads");
+        let _ = std::fs::remove_dir_all(&d);
+        (0..r.len()).map(|i| *r.get(i).expect("held")).collect::<Vec<_>>()
+    };
+    let one = replay_of(1, "n1");
+    let three = replay_of(3, "n3");
+    assert_eq!(one.len(), 200);
+    // Every step is stored once, but the last two of an unfinished episode, which wait for
+    // the steps after them (in the checkpoint).
+    assert!((198..=200).contains(&three.len()), "{} stored", three.len());
+    let gamma = TrainConfig::default().gamma;
+    let mut short = 0;
+    for t in &three {
+        let i = one.iter().position(|o| o.obs == t.obs && o.action == t.action).expect("its step");
+        let k = usize::from(t.steps);
+        assert!((1..=3).contains(&k));
+        let run = &one[i..i + k];
+        // No collision before the last of the k steps.
+        assert!(run[..k - 1].iter().all(|o| !o.terminated));
+        let sum = run.iter().rev().map(|o| o.reward).reduce(|later, r| r + gamma * later);
+        assert_eq!(t.reward, sum.expect("k >= 1"), "step {i}");
+        assert_eq!(t.next, run[k - 1].next, "s' of step {i}");
+        assert_eq!(t.terminated, run[k - 1].terminated);
+        if k < 3 {
+            short += 1;
+        }
+    }
+    assert!(short >= 4, "episode ends store shorter returns ({short})");
 }
