@@ -48,6 +48,15 @@ pub struct TrainConfig {
     pub epsilon_end: f32,
     /// Steps over which ε decays linearly.
     pub epsilon_decay_steps: u64,
+    /// Demonstrations: during the first `demo_steps` environment steps an exploratory
+    /// action (taken with probability ε) is, with probability `demo_share`, the classical
+    /// `avoid` baseline's (`mdrlat_sim::AvoidPolicy`, which watches every step of every
+    /// environment meanwhile) instead of a uniformly random one. Q-learning learns off-policy
+    /// from both. 0: none (the paper). At most `checkpoint_interval`, so that no checkpoint
+    /// falls inside them (`avoid`'s maps are not saved).
+    pub demo_steps: u64,
+    /// The share of exploratory actions that are `avoid`'s during `demo_steps`.
+    pub demo_share: f32,
     /// Weight of the auxiliary loss (eq. 12): it scales that loss's gradient (with
     /// `aux_optimizer = "joint"`, its share of the summed loss).
     pub aux_loss_weight: f32,
@@ -106,6 +115,8 @@ impl Default for TrainConfig {
             epsilon_start: 0.1,
             epsilon_end: 0.0001,
             epsilon_decay_steps: 20_000,
+            demo_steps: 0,
+            demo_share: 0.5,
             aux_loss_weight: 1.0,
             aux_optimizer: AuxOptimizer::Separate,
             eval_interval: 5_000,
@@ -235,6 +246,19 @@ impl TrainConfig {
             if !(0.0..=1.0).contains(&v) {
                 return err(field, format!("must be in [0, 1], got {v}"));
             }
+        }
+        if self.demo_steps > self.checkpoint_interval.min(self.total_steps) {
+            return err(
+                "train.demo_steps",
+                format!(
+                    "{} is beyond train.checkpoint_interval ({}) or train.total_steps ({}): \
+                     a checkpoint cannot hold the demonstrator's state",
+                    self.demo_steps, self.checkpoint_interval, self.total_steps
+                ),
+            );
+        }
+        if !(0.0..=1.0).contains(&self.demo_share) {
+            return err("train.demo_share", format!("must be in [0, 1], got {}", self.demo_share));
         }
         if self.n_step == 0 || self.n_step > 16 {
             return err("train.n_step", format!("must be in 1..=16, got {}", self.n_step));

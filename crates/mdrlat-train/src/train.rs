@@ -8,7 +8,7 @@ use crate::learner::{Inputs, Learner, Losses};
 use crate::policy::observation_inputs;
 use crate::replay::{Batch, FrameId, ReplayBuffer, Transition};
 use crate::tensorboard::EventWriter;
-use mdrlat_core::{Action, FRAME_STACK, ODOM_HISTORY, PolicyError, Rng};
+use mdrlat_core::{Action, FRAME_STACK, ODOM_HISTORY, Policy, PolicyError, Rng};
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::config::Task;
 use mdrlat_sim::{
@@ -548,16 +548,42 @@ pub fn train(
     };
     let (mut lap, mut timing) = (Lap(Instant::now()), Timing::default());
     let (mut actions, mut greedy_envs) = (vec![0usize; n_envs], Vec::with_capacity(n_envs));
+    // The demonstrator of the first `demo_steps` steps, watching every environment.
+    let mut demonstrator = if run.step < config.demo_steps {
+        let avoid = mdrlat_sim::AvoidPolicy::new(sim, mdrlat_sim::AvoidConfig::default())
+            .map_err(|e| TrainError::Policy { step: run.step, source: PolicyError::Backend(e) })?;
+        Some(avoid)
+    } else {
+        None
+    };
+    let (mut demo_actions, all_envs): (Vec<Action>, Vec<usize>) =
+        (Vec::with_capacity(n_envs), (0..n_envs).collect());
 
     // Algorithm 1, line 2, for every environment in turn: a tick steps each once.
     let mut done_steps = run.step;
     while done_steps < config.total_steps {
         // Line 3: ε-greedy on each environment's s_k; the greedy ones in one forward pass.
+        // During the demonstrations an exploratory action may be `avoid`'s.
         greedy_envs.clear();
+        demo_actions.clear();
+        if done_steps >= config.demo_steps {
+            demonstrator = None;
+        }
+        if let Some(demo) = demonstrator.as_mut() {
+            let observations: Vec<&Observation> =
+                envs.iter().map(|s| s.env.observation()).collect();
+            demo.act(&observations, &all_envs, &mut demo_actions)
+                .map_err(|source| TrainError::Policy { step: done_steps + 1, source })?;
+        }
         for (k, action) in actions.iter_mut().enumerate() {
             let epsilon = config.epsilon(done_steps + k as u64);
             if run.explore_rng.uniform() < f64::from(epsilon) {
-                *action = run.explore_rng.below(Action::COUNT);
+                *action = match demo_actions.get(k) {
+                    Some(a) if run.explore_rng.uniform() < f64::from(config.demo_share) => {
+                        a.index()
+                    }
+                    _ => run.explore_rng.below(Action::COUNT),
+                };
             } else {
                 greedy_envs.push(k);
             }
@@ -627,6 +653,9 @@ pub fn train(
                 run.window.episodes += 1;
                 run.episodes += 1;
                 (slot.episode_reward, slot.episode_length) = (0.0, 0);
+                if let Some(demo) = demonstrator.as_mut() {
+                    demo.begin_episode(k, None);
+                }
                 if scenes.len() > 1 {
                     // The next world, keeping the environment's random streams.
                     slot.world = (slot.world + 1) % scenes.len();

@@ -111,6 +111,8 @@ fn several_environments_over_several_worlds_resume_exactly() {
         gradient_steps: 2,
         train_frequency: 2,
         n_step: 3,
+        demo_steps: 90,
+        checkpoint_interval: 90,
         ..config(Variant::LaserOnly, steps)
     };
     let straight = dir("multi-straight");
@@ -352,4 +354,29 @@ fn n_step_transitions_add_up_the_one_step_ones() {
         }
     }
     assert!(short >= 4, "episode ends store shorter returns ({short})");
+}
+
+/// Demonstrations: with every action exploratory and every exploratory action `avoid`'s, the
+/// training episodes are `avoid`'s, which all run to the time limit; random actions crash.
+#[test]
+fn demonstrations_drive_the_early_episodes() {
+    let episodes = |demo_share| {
+        let cfg = TrainConfig {
+            epsilon_start: 1.0,
+            epsilon_end: 1.0,
+            demo_steps: 300,
+            demo_share,
+            checkpoint_interval: 300,
+            ..config(Variant::LaserOnly, 300)
+        };
+        let d = dir(&format!("demo-{demo_share}"));
+        let (report, _) =
+            train(vec![world()], &sim(), &cfg, &Device::flex(), &d, false, |_| {}).expect("run");
+        let _ = std::fs::remove_dir_all(&d);
+        report.episodes
+    };
+    let (demonstrated, random) = (episodes(1.0), episodes(0.0));
+    // 300 steps of 60-step episodes: 5 when none ends in a collision.
+    assert_eq!(demonstrated, 5, "episodes with avoid driving");
+    assert!(random > demonstrated, "{random} random episodes: some crash");
 }
