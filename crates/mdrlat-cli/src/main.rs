@@ -10,8 +10,8 @@ macro_rules! out {
 }
 
 /// mimalloc instead of glibc malloc: the learner allocates and frees multi-megabyte
-/// tensors every step, which glibc returns to the OS and faults back in (see README,
-/// Performance).
+/// tensors every step, which glibc returns to the OS and faults back in (see
+/// docs/performance.md).
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 

@@ -28,7 +28,7 @@ impl Limits {
 }
 
 /// The local planner's settings (defaults after move_base's `dwa_local_planner`, scaled to
-/// this robot; every one documented in the README).
+/// this robot; every one documented in docs/navigation.md).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DwaConfig {
     /// Robot radius, metres.

@@ -95,7 +95,7 @@ fn readme(
     let _ = writeln!(s, "# {name}: a trained `{}` network\n", policy.variant());
     let _ = writeln!(
         s,
-        "- Weights: `model.safetensors`, {:?}, {:.1} MB, PyTorch layout (see the main README, *Weights in PyTorch*).",
+        "- Weights: `model.safetensors`, {:?}, {:.1} MB, PyTorch layout (see the repository's docs/training.md, *Weights in PyTorch*).",
         precision,
         bytes as f64 / 1e6
     );
