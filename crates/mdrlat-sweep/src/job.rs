@@ -44,6 +44,9 @@ pub fn commands(plan: &Plan, job: &Job, threads: usize) -> Result<Vec<Vec<String
                 if s.task != Task::Avoid {
                     argv.extend(["--task".into(), s.task.to_string()]);
                 }
+                if s.train_preset != "paper" {
+                    argv.extend(["--preset".into(), s.train_preset.clone()]);
+                }
                 for set in &s.set {
                     argv.push("--set".into());
                     argv.push(set.clone());
@@ -175,6 +178,11 @@ mod tests {
         let argv = commands(&plan, &job, 1).expect("fresh");
         assert_eq!(argv[0][..3], ["train".to_string(), "--out".into(), run.display().to_string()]);
         assert!(argv[0].contains(&"train.checkpoint_interval=100".to_string()));
+        assert!(!argv[0].contains(&"--preset".to_string()), "the paper's settings: no flag");
+        let fast = Plan::new(Sweep::preset("fast").expect("fast"), &dir.join("fast"));
+        let fast_job = fast.job("train/mdrlat-s0").expect("job").clone();
+        let fast_argv = commands(&fast, &fast_job, 1).expect("fresh")[0].join(" ");
+        assert!(fast_argv.contains("--preset fast") && fast_argv.contains("--world gen-0..64"));
         // Killed before a checkpoint: the half-made run is cleared and started again.
         std::fs::create_dir_all(run.join("checkpoint")).expect("dir");
         std::fs::write(run.join("config.toml"), "").expect("file");

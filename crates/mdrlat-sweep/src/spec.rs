@@ -9,11 +9,12 @@ use mdrlat_sim::config::Task;
 use serde::{Deserialize, Serialize};
 
 /// The built-in presets: name and TOML text.
-pub const PRESETS: [(&str, &str); 4] = [
+pub const PRESETS: [(&str, &str); 5] = [
     ("paper", include_str!("../presets/paper.toml")),
     ("cpu-small", include_str!("../presets/cpu-small.toml")),
     ("smoke", include_str!("../presets/smoke.toml")),
     ("nav", include_str!("../presets/nav.toml")),
+    ("fast", include_str!("../presets/fast.toml")),
 ];
 
 /// The most training runs one sweep may hold (a Slurm array's index range is finite too).
@@ -44,6 +45,10 @@ pub struct Sweep {
     /// Compute device of the training runs (`mdrlat train --device`).
     #[serde(default = "default_device")]
     pub device: String,
+    /// The settings every training run starts from (`mdrlat train --preset`): `paper` (the
+    /// defaults) or `fast` (mdrlat's own recipe).
+    #[serde(default = "default_train_preset")]
+    pub train_preset: String,
     /// Settings of every training run, as `mdrlat train --set KEY=VALUE`.
     #[serde(default)]
     pub set: Vec<String>,
@@ -92,6 +97,10 @@ fn default_min_path_m() -> f32 {
 
 fn default_min_reach_m() -> f32 {
     mdrlat_sim::MovingRule::DEFAULT.min_reach_m
+}
+
+fn default_train_preset() -> String {
+    "paper".into()
 }
 
 fn default_world() -> String {
@@ -180,6 +189,12 @@ impl Sweep {
         }
         if self.steps == 0 {
             return Err("steps = 0: a training run needs at least 1 step".into());
+        }
+        if !["paper", "fast"].contains(&self.train_preset.as_str()) {
+            return Err(format!(
+                "train_preset '{}': expected paper or fast (mdrlat train --preset)",
+                self.train_preset
+            ));
         }
         if self.world.trim().is_empty() {
             return Err("world: empty".into());
@@ -322,6 +337,14 @@ mod tests {
         let paper = Sweep::preset("paper").expect("paper");
         assert_eq!((paper.variants.len(), paper.seeds.len(), paper.steps), (6, 5, 400_000));
         assert_eq!((paper.eval.runs, paper.eval.episodes, paper.eval.max_steps), (5, 50, 300));
+        assert_eq!(paper.train_preset, "paper");
+        let fast = Sweep::preset("fast").expect("fast");
+        assert_eq!((fast.variants.len(), fast.seeds.len()), (6, 3));
+        assert_eq!((fast.train_preset.as_str(), fast.world.as_str()), ("fast", "gen-0..64"));
+        let mut bad = fast.clone();
+        bad.train_preset = "quick".into();
+        let e = bad.validate().expect_err("unknown train preset");
+        assert!(e.contains("train_preset 'quick'"), "{e}");
     }
 
     #[test]

@@ -26,8 +26,9 @@ pub enum Executor {
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// A built-in sweep: paper (6 variants x 5 seeds x 400k steps), cpu-small (a few hours
-    /// on 2 cores) or smoke (minutes). Without --preset or --sweep, the sweep already in
-    /// --out is continued.
+    /// on 2 cores), smoke (minutes), nav (the navigation experiment) or fast (6 variants x 3
+    /// seeds of mdrlat's own recipe on generated worlds). Without --preset or --sweep, the
+    /// sweep already in --out is continued.
     #[arg(long, conflicts_with = "sweep")]
     preset: Option<String>,
     /// A sweep file of your own (see `--print paper` for every key).
