@@ -93,6 +93,10 @@ pub struct TrainConfig {
     pub curve_min_reach_m: f32,
     /// Steps between checkpoints.
     pub checkpoint_interval: u64,
+    /// A checkpoint at the last step too, so that the finished run can be extended with
+    /// `--resume --steps` (false: a short run leaves its weights, `model.safetensors`, and no
+    /// optimiser state or replay: the demo's 300-step run).
+    pub final_checkpoint: bool,
 }
 
 impl Default for TrainConfig {
@@ -127,6 +131,7 @@ impl Default for TrainConfig {
             curve_min_path_m: mdrlat_sim::MovingRule::DEFAULT.min_path_m,
             curve_min_reach_m: mdrlat_sim::MovingRule::DEFAULT.min_reach_m,
             checkpoint_interval: 10_000,
+            final_checkpoint: true,
         }
     }
 }

@@ -737,10 +737,10 @@ pub fn train(
             }
             timing.evaluation += lap.split();
             // A checkpoint every interval and at the end (so a finished run can be
-            // extended), written once the tick is done: every environment then stands after
-            // its step.
-            checkpoint_due |=
-                t.is_multiple_of(config.checkpoint_interval) || t == config.total_steps;
+            // extended; unless `final_checkpoint` is off), written once the tick is done:
+            // every environment then stands after its step.
+            checkpoint_due |= t.is_multiple_of(config.checkpoint_interval)
+                || (t == config.total_steps && config.final_checkpoint);
             status.step = t;
             status.epsilon = epsilon;
             status.episodes = run.episodes;

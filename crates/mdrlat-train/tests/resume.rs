@@ -380,3 +380,23 @@ fn demonstrations_drive_the_early_episodes() {
     assert_eq!(demonstrated, 5, "episodes with avoid driving");
     assert!(random > demonstrated, "{random} random episodes: some crash");
 }
+
+/// `final_checkpoint = false`: a short run leaves no optimiser state or replay behind, and
+/// asking to resume it says there is nothing to resume from.
+#[test]
+fn a_run_without_a_final_checkpoint_leaves_none_and_says_so() {
+    let d = dir("no-final");
+    let cfg = TrainConfig {
+        final_checkpoint: false,
+        checkpoint_interval: 1000,
+        ..config(Variant::LaserOnly, 120)
+    };
+    train(vec![world()], &sim(), &cfg, &Device::flex(), &d, false, |_| {}).expect("run");
+    assert!(!d.join("checkpoint").exists(), "no checkpoint written");
+    assert!(read(&d, "metrics.csv").lines().count() > 1, "the metrics are there");
+    let e = train(vec![world()], &sim(), &cfg, &Device::flex(), &d, true, |_| {})
+        .expect_err("nothing to resume")
+        .to_string();
+    assert!(e.contains("no checkpoint"), "{e}");
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -61,6 +61,17 @@ fn pipeline(a: &Args) -> Result<()> {
         variants: vec![Variant::Mdrlat],
         seeds: vec![0],
         steps: a.train_steps,
+        // A pipeline check leaves its weights only: no optimiser state or replay (~200 MB
+        // for MDRLAT) that nobody would extend a 300-step run from.
+        set: smoke
+            .set
+            .iter()
+            .cloned()
+            .chain([
+                format!("train.checkpoint_interval={}", a.train_steps + 1),
+                "train.final_checkpoint=false".into(),
+            ])
+            .collect(),
         eval: EvalSpec {
             worlds: vec!["office".into()],
             episodes: 10,

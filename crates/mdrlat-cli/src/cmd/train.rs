@@ -257,8 +257,9 @@ pub fn run(a: &Args) -> Result<()> {
         .map(|(name, s)| format!("{name} {s:.1} s ({:.0}%)", 100.0 * s / total_s))
         .collect();
     out!("where the time went: {}", parts.join(", "));
+    let checkpoint = if dir.join("checkpoint").is_dir() { "checkpoint/, " } else { "" };
     out!(
-        "wrote {0}/config.toml, run.toml, metrics.csv, eval.csv, events.out.tfevents.*, checkpoint/, model.safetensors",
+        "wrote {0}/config.toml, run.toml, metrics.csv, eval.csv, events.out.tfevents.*, {checkpoint}model.safetensors",
         dir.display()
     );
     Ok(())
