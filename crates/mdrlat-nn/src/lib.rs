@@ -30,3 +30,37 @@ pub use variant::{Variant, VariantParseError};
 
 /// The burn re-exports the rest of mdrlat builds on, so every crate uses the same version.
 pub use burn;
+
+#[cfg(test)]
+mod portable {
+    use super::host;
+
+    /// The CPU kernels' tests once more with `MDRLAT_PORTABLE_KERNELS=1`: on a machine with
+    /// AVX-512 the portable branches (the `gemm` crate's paths, the plain loops) never run
+    /// otherwise. The test binary runs its own `host::` tests in a child process.
+    #[test]
+    fn the_host_tests_pass_on_the_portable_kernels() {
+        if host::gemm::portable_forced() {
+            return; // already the portable run (or its child): nothing to repeat
+        }
+        let exe = std::env::current_exe().expect("the test binary's path");
+        let out = std::process::Command::new(exe)
+            .args(["host::", "--nocapture"])
+            .env("MDRLAT_PORTABLE_KERNELS", "1")
+            .env("MDRLAT_REQUIRE_AVX512", "0")
+            .output()
+            .expect("run the test binary");
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(out.status.success(), "host tests on the portable kernels failed:\n{text}");
+        // The child ran the kernel tests, and the AVX-512-only ones said they were skipped.
+        assert!(text.contains("test result: ok"), "{text}");
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            assert!(text.contains("SKIPPED"), "AVX-512 tests ran on the portable kernels:\n{text}");
+        }
+    }
+}

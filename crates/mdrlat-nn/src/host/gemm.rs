@@ -440,6 +440,13 @@ impl Bf16Matrix {
     }
 }
 
+/// Whether `MDRLAT_PORTABLE_KERNELS=1` asks for the portable kernels on a CPU that has
+/// AVX-512 (the `gemm` crate's paths and the plain loops): CI runs the network tests once
+/// so, and the branches a machine with AVX-512 never takes are tested there too.
+pub(crate) fn portable_forced() -> bool {
+    std::env::var_os("MDRLAT_PORTABLE_KERNELS").is_some_and(|v| v == "1")
+}
+
 /// Whether [`Bf16Matrix::vec_mul`] has its kernel on this CPU.
 pub(crate) fn bf16_available() -> bool {
     #[cfg(target_arch = "x86_64")]
@@ -607,8 +614,13 @@ mod avx512 {
     // SAFETY: as above.
     unsafe impl Sync for SendPtr {}
 
+    /// AVX-512F is there and the portable kernels are not forced (see
+    /// [`super::portable_forced`]); decided once per process.
     pub(super) fn available() -> bool {
-        std::arch::is_x86_feature_detected!("avx512f")
+        static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *ON.get_or_init(|| {
+            std::arch::is_x86_feature_detected!("avx512f") && !super::portable_forced()
+        })
     }
 
     fn mask(n: usize) -> u16 {
@@ -1580,13 +1592,37 @@ mod tests {
         assert!(f32::from_bits(u32::from(to_bf16(f32::NAN)) << 16).is_nan());
     }
 
+    /// Whether the AVX-512 kernels run here. A test of them that cannot run says so, and
+    /// fails where `MDRLAT_REQUIRE_AVX512=1` says they must (CI sets it where the CPU has
+    /// AVX-512F and the portable kernels are not forced).
+    fn avx512_here(test: &str) -> bool {
+        if bf16_available() {
+            return true;
+        }
+        let required = std::env::var_os("MDRLAT_REQUIRE_AVX512").is_some_and(|v| v == "1");
+        assert!(
+            !required,
+            "{test}: MDRLAT_REQUIRE_AVX512=1, yet the AVX-512 kernels are off here (no AVX-512F, \
+             or MDRLAT_PORTABLE_KERNELS=1)"
+        );
+        eprintln!("SKIPPED {test}: the AVX-512 kernels are off here");
+        false
+    }
+
+    /// A direct convolution that declined to run did so exactly where the AVX-512 kernels
+    /// are off (see [`avx512_here`]): `ran` is whether it ran.
+    fn ran_where_expected(ran: bool, test: &str) -> bool {
+        let here = avx512_here(test);
+        assert_eq!(ran, here, "{test}: the kernel ran {ran}, the AVX-512 kernels are on: {here}");
+        ran
+    }
+
     /// The bfloat16 vector-matrix kernel against the definition (weights rounded, widened
     /// back to f32, sums in f64) on row counts around its unroll of 4 and column tails
     /// around its blocks of 32.
     #[test]
     fn bf16_vec_mul_matches_the_definition() {
-        if !bf16_available() {
-            eprintln!("no AVX-512: the bfloat16 kernel is not offered here");
+        if !avx512_here("bf16_vec_mul_matches_the_definition") {
             return;
         }
         for (k, n) in [(1, 1), (3, 6), (4, 10), (5, 16), (7, 17), (6, 33), (100, 300), (257, 512)] {
@@ -1618,7 +1654,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn packed_rows_are_the_rows_side_by_side() {
-        if !avx512::available() {
+        if !avx512_here("packed_rows_are_the_rows_side_by_side") {
             return;
         }
         for (m, k) in [(1, 1), (3, 17), (8, 16), (9, 33), (13, 37), (32, 130), (5, 2)] {
@@ -1868,7 +1904,8 @@ mod tests {
             let wt = ConvCase::values(g.channels * g.kh * g.kw * 16);
             let want = c.definition(&wt, true);
             let mut got = vec![0.5f32; want.len()];
-            if conv16(&g, &c.img, &wt, &mut got, &c.img) {
+            let ran = conv16(&g, &c.img, &wt, &mut got, &c.img);
+            if ran_where_expected(ran, "conv16_matches_the_definition") {
                 c.check(&got, &want);
             }
         }
@@ -1884,7 +1921,8 @@ mod tests {
             let dy = ConvCase::values(g.out_rows * g.out_cols * 16);
             let want = c.definition(&dy, false);
             let mut got = vec![0.5f32; want.len()];
-            if conv16_weight_grad(&g, &c.img, &dy, &mut got, &c.img) {
+            let ran = conv16_weight_grad(&g, &c.img, &dy, &mut got, &c.img);
+            if ran_where_expected(ran, "conv16_weight_grad_matches_the_definition") {
                 c.check(&got, &want);
             }
         }
