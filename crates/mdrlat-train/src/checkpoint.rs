@@ -11,9 +11,9 @@
 //! uninterrupted one.
 
 use crate::config::TrainConfig;
+use crate::error::TrainError;
 use crate::learner::Learner;
 use crate::replay::{FrameId, ReplayBuffer};
-use crate::train::TrainError;
 use mdrlat_core::Rng;
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
@@ -51,6 +51,16 @@ pub struct Window {
     pub episode_length: f64,
     /// Episodes finished in the window.
     pub episodes: u32,
+}
+
+impl Window {
+    /// One gradient step's losses.
+    pub fn add_losses(&mut self, losses: &crate::learner::Losses) {
+        self.td += f64::from(losses.td);
+        self.at += f64::from(losses.at);
+        self.q += f64::from(losses.q_mean);
+        self.updates += 1;
+    }
 }
 
 /// Everything of a run that is not weights or replay.

@@ -6,19 +6,33 @@
 pub mod adam;
 pub mod bench;
 pub mod checkpoint;
+pub mod collect;
 pub mod config;
+pub mod error;
+pub mod evaluation;
 pub mod export;
 pub mod learner;
 pub mod policy;
 pub mod replay;
+pub mod run_dir;
+pub mod settings;
+pub mod sink;
 pub mod tensorboard;
+mod timing;
 pub mod train;
 
+pub use collect::TrainEnvs;
 pub use config::{AuxOptimizer, TrainConfig, TrainConfigError};
+pub use error::TrainError;
+pub use evaluation::{CurvePoint, Evaluation, evaluate};
 pub use learner::{Inputs, Learner, Losses};
 pub use policy::{GreedyPolicy, observation_inputs};
 pub use replay::{Batch, DepthFrames, DepthLayout, ReplayBuffer, Transition};
-pub use train::{CurvePoint, Evaluation, Status, Timing, TrainError, TrainReport, evaluate, train};
+pub use run_dir::{RunDir, RunInfo};
+pub use settings::{Config, Preset};
+pub use sink::MetricsSink;
+pub use timing::Timing;
+pub use train::{Status, TrainReport, train};
 
 /// Readies the process for work on `device`. On a LibTorch GPU, LibTorch's CPU thread pool
 /// shrinks to one thread: with one thread a core it took the cores from rayon's threads

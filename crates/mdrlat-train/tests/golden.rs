@@ -8,10 +8,13 @@
 //! landed on uses. Elsewhere the test says it skipped, and fails under
 //! `MDRLAT_REQUIRE_AVX512=1`.
 
+mod common;
+use common::train;
+
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::SimConfig;
-use mdrlat_train::{TrainConfig, train};
+use mdrlat_train::TrainConfig;
 use std::path::{Path, PathBuf};
 
 fn fnv1a(bytes: &[u8]) -> u64 {

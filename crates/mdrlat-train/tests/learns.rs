@@ -2,11 +2,14 @@
 //! steps in a small room beats the random policy's greedy-evaluation reward by a wide margin.
 //! (About a minute on 2 cores in release.)
 
+mod common;
+use common::train;
+
 use mdrlat_core::{Action, Rng};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::{Env, SimConfig};
-use mdrlat_train::{TrainConfig, train};
+use mdrlat_train::TrainConfig;
 use mdrlat_world::World;
 
 const ROOM: &str = r#"

@@ -2,10 +2,13 @@
 //! middle of later steps) and resumed ends with the same weights, metrics and evaluations as
 //! the run that was never interrupted. Bad checkpoints are clear errors.
 
+mod common;
+use common::train;
+
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::SimConfig;
-use mdrlat_train::{Inputs, TrainConfig, train};
+use mdrlat_train::{Inputs, TrainConfig};
 use std::path::{Path, PathBuf};
 
 fn dir(name: &str) -> PathBuf {
@@ -260,7 +263,7 @@ fn learning_curves_measure_the_training_world_and_an_unseen_one() {
         let text = read(&d, "eval.csv");
         let mut lines = text.lines();
         let header = lines.next().expect("header");
-        assert_eq!(header, mdrlat_train::train::EVAL_HEADER);
+        assert_eq!(header, mdrlat_train::sink::EVAL_HEADER);
         let rows: Vec<Vec<String>> =
             lines.map(|l| l.split(',').map(str::to_string).collect()).collect();
         assert_eq!(rows.len(), report.evaluations.len());

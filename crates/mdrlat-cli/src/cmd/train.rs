@@ -1,13 +1,13 @@
 //! `mdrlat train`: one training run of Algorithm 1 into a run directory.
 
-use super::{TaskArgs, ensure_dir};
-use crate::config::{Config, Preset};
-use anyhow::{Context, Result, bail};
+use super::TaskArgs;
+use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::config::Task;
-use std::path::{Path, PathBuf};
+use mdrlat_train::{Config, Preset, RunDir, RunInfo};
+use std::path::PathBuf;
 
 /// The compute device. Backends other than `cpu` exist when the binary is built with
 /// their cargo feature (`--features wgpu`, `tch` or `cuda`).
@@ -70,7 +70,7 @@ pub struct Args {
     world: Option<String>,
     /// Settings to start from, below --config and --set: paper (the defaults) or fast
     /// (mdrlat's own recipe, configs/fast.toml)
-    #[arg(long, value_enum, default_value = "paper")]
+    #[arg(long, default_value = "paper")]
     preset: Preset,
     #[command(flatten)]
     task: TaskArgs,
@@ -98,56 +98,20 @@ pub struct Args {
     device: Option<DeviceKind>,
 }
 
-/// What a run directory records about how it was started (`run.toml`).
-#[derive(Debug, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RunInfo {
-    world: String,
-    device: String,
-    mdrlat_version: String,
-}
-
-fn check_fresh(dir: &Path) -> Result<()> {
-    if dir.exists() {
-        let empty = std::fs::read_dir(dir).map(|mut d| d.next().is_none()).unwrap_or(false);
-        if !empty {
-            bail!(
-                "{} already holds a run: choose another --out (nothing was overwritten)",
-                dir.display()
-            );
-        }
-    }
-    ensure_dir(dir)
-}
-
-/// Writes the run's resolved `config.toml`.
-fn write_config(dir: &Path, config: &Config) -> Result<()> {
-    let resolved = toml::to_string(config).context("serialising the config")?;
-    let path = dir.join("config.toml");
-    let header = "# Resolved configuration of this run: every setting, defaults included.\n\n";
-    std::fs::write(&path, format!("{header}{resolved}"))
-        .with_context(|| format!("cannot write {}", path.display()))
-}
-
 /// Runs `mdrlat train`.
 pub fn run(a: &Args) -> Result<()> {
-    let (dir, config, info, resume) = match &a.resume {
-        Some(dir) => {
-            let mut config = Config::load_run(&dir.join("config.toml"))?;
-            let path = dir.join("run.toml");
-            let text = std::fs::read_to_string(&path)
-                .with_context(|| format!("cannot read {}", path.display()))?;
-            let info: RunInfo =
-                toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let (root, opened, config, info) = match &a.resume {
+        Some(root) => {
+            let (dir, mut config, info) = RunDir::open(root)?;
             if let Some(s) = a.steps {
                 config.train.total_steps = s;
                 // The run's config records how long it now runs, for later resumes.
-                write_config(dir, &config)?;
+                dir.write_config(&config)?;
             }
-            (dir.clone(), config, info, true)
+            (root.clone(), Some(dir), config, info)
         }
         None => {
-            let dir = a.out.clone().context("--out is required")?;
+            let root = a.out.clone().context("--out is required")?;
             let mut config = Config::resolve_preset(a.preset, a.config.as_deref(), &a.sets)?;
             if let Some(v) = a.variant {
                 config.train.variant = v;
@@ -163,12 +127,8 @@ pub fn run(a: &Args) -> Result<()> {
             config.train.validate()?;
             let device = a.device.unwrap_or(DeviceKind::Cpu);
             let default_world = a.preset.default_world(config.sim.task);
-            let info = RunInfo {
-                world: a.world.clone().unwrap_or_else(|| default_world.into()),
-                device: device.name(),
-                mdrlat_version: env!("CARGO_PKG_VERSION").to_string(),
-            };
-            (dir, config, info, false)
+            let world = a.world.clone().unwrap_or_else(|| default_world.into());
+            (root, None, config, RunInfo::new(world, device.name()))
         }
     };
     let worlds = mdrlat_world::load_set(&info.world)?;
@@ -177,19 +137,18 @@ pub fn run(a: &Args) -> Result<()> {
         DeviceKind::from_str(&info.device, true).map_err(|_| {
             anyhow::anyhow!(
                 "{}: device '{}' is not available in this build (rebuild with --features {})",
-                dir.join("run.toml").display(),
+                RunDir::at(&root).run_info().display(),
                 info.device,
                 info.device
             )
         })?
     };
-    if !resume {
-        check_fresh(&dir)?;
-        write_config(&dir, &config)?;
-        let path = dir.join("run.toml");
-        std::fs::write(&path, toml::to_string(&info).context("serialising run.toml")?)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-    }
+    let resume = opened.is_some();
+    let dir = match opened {
+        Some(dir) => dir,
+        None => RunDir::create(&root, &config, &info)?,
+    };
+    let mut envs = mdrlat_train::TrainEnvs::new(worlds, &config.sim, config.train.envs)?;
 
     let total = config.train.total_steps;
     let pb = ProgressBar::new(total);
@@ -211,7 +170,7 @@ pub fn run(a: &Args) -> Result<()> {
         }
     };
     let (report, learner) = mdrlat_train::train(
-        worlds,
+        &mut envs,
         &config.sim,
         &config.train,
         &device.device(),
@@ -220,15 +179,7 @@ pub fn run(a: &Args) -> Result<()> {
         on_step,
     )?;
     pb.finish_and_clear();
-    let weights = dir.join("model.safetensors");
-    mdrlat_train::export::save_safetensors_as(
-        &learner.policy_net(),
-        learner.net_config(),
-        &weights,
-        mdrlat_train::export::Precision::F32,
-        &[("mdrlat_step", report.steps.to_string())],
-    )
-    .map_err(anyhow::Error::msg)?;
+    dir.save_model(&learner, report.steps)?;
     let last = report.evaluations.last().map(|e| {
         let reached = if config.sim.task == Task::Nav {
             format!(", {:.0}% of goals reached", 100.0 * e.success_rate())
@@ -257,10 +208,10 @@ pub fn run(a: &Args) -> Result<()> {
         .map(|(name, s)| format!("{name} {s:.1} s ({:.0}%)", 100.0 * s / total_s))
         .collect();
     out!("where the time went: {}", parts.join(", "));
-    let checkpoint = if dir.join("checkpoint").is_dir() { "checkpoint/, " } else { "" };
+    let checkpoint = if dir.checkpoint().is_dir() { "checkpoint/, " } else { "" };
     out!(
         "wrote {0}/config.toml, run.toml, metrics.csv, eval.csv, events.out.tfevents.*, {checkpoint}model.safetensors",
-        dir.display()
+        dir.path().display()
     );
     Ok(())
 }

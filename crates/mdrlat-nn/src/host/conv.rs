@@ -63,10 +63,11 @@ impl ConvGeometry {
     /// The patches of `batch` channel-last images into `cols`, `[B·positions, patch_len]`;
     /// padding reads 0. Every value is written once: the padding's zeros beside the copied
     /// spans, not a zeroed buffer first (a whole extra pass over a buffer of megabytes, which
-    /// had taken twice as long as the copy itself in a training step).
+    /// had taken longer than the copy itself in a training step).
     pub(crate) fn im2col(&self, x: &[f32], batch: usize, cols: &mut Vec<f32>) {
         let (k, image) = (self.patch_len(), self.h * self.w * self.c);
-        debug_assert_eq!(x.len(), batch * image);
+        // Checked in release too: the `set_len` below relies on every value being written.
+        assert_eq!(x.len(), batch * image, "im2col: {batch} images of {image} values");
         let len = batch * self.positions() * k;
         cols.clear();
         if k == 0 || image == 0 {
@@ -105,11 +106,14 @@ impl ConvGeometry {
         } else {
             spare.par_chunks_mut(self.positions() * k).zip(x.par_chunks(image)).for_each(fill);
         }
-        // SAFETY: the loop above wrote every one of the first `len` values of the spare
-        // capacity: each image's `positions · k` values are its `positions` patches of `k`,
-        // and each patch's `kh` kernel rows of `kw · c` are written whole (zeros, or zeros,
-        // the span copied from the image, zeros); the `len` values fit the capacity
-        // reserved.
+        // SAFETY: the `len` values fit the capacity reserved above, and the loop above
+        // wrote every one of them: `spare` is `batch` chunks of `positions · k`, each paired
+        // with one image of `x`; a chunk's `positions` patches of `k = kh · kw · c` are
+        // `kh` kernel rows of `kw · c`, each written whole (zeros, or zeros, the span of
+        // `(hi - lo) · c` values copied from an image slice of exactly that length, zeros).
+        // Every chunk has its image because `x` holds exactly `batch` images (asserted at
+        // the top, in release builds too: a shorter `x` would stop the zip early). A panic
+        // in `fill` leaves `cols` empty.
         #[allow(unsafe_code)]
         unsafe {
             cols.set_len(len);
@@ -197,8 +201,8 @@ pub(crate) fn conv_relu(
 
 /// `y = relu(cols · wᵀ + bias)`, `[rows, out]`, for patches `cols` (`[rows, k]`) and a weight
 /// `w` (`[out, k]`), given also transposed (`wt`, `[k, out]`: what a batch's product reads,
-/// kept by the caller instead of gathered at every call — ~7 % of the second depth
-/// convolution's forward at batch 32 on a Zen 4 core).
+/// kept by the caller instead of gathered at every call, a measurable share of the second
+/// depth convolution's forward).
 pub(crate) fn patch_product_relu(
     cols: &[f32],
     w: &[f32],
@@ -209,8 +213,8 @@ pub(crate) fn patch_product_relu(
     let out = bias.len();
     let k = w.len() / out.max(1);
     debug_assert_eq!(wt.len(), w.len());
-    // A single observation's few patches: the `gemm` crate (faster there: 0.30–0.36 against
-    // 0.37–0.38 ms for a depth-only decision on one Zen 4 core); a batch's: `gemm_tall`.
+    // A single observation's few patches: the `gemm` crate (faster there, for a depth-only
+    // decision on a Zen 4 core); a batch's: `gemm_tall`.
     if rows < 1024 {
         let mut y = bias.repeat(rows);
         gemm(rows, out, k, Mat::n(cols), Mat::t(w), &mut y, true);

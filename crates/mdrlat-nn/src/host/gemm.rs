@@ -78,8 +78,10 @@ pub(crate) fn gemm(
         c[..m * n].fill(0.0);
         return;
     }
-    // SAFETY: `c` holds `m × n` values (asserted) and is borrowed mutably, so it overlaps
-    // neither input.
+    // SAFETY: `product` needs `c` valid for writes (and, with `accumulate`, reads) of
+    // `m × n` values and disjoint from both inputs: `c` holds at least `m × n` initialised
+    // values (asserted above), and as a `&mut` borrow it cannot overlap the shared borrows
+    // inside `a` and `b`. `product` checks the inputs' sizes itself.
     unsafe { product(m, n, k, a, b, c.as_mut_ptr(), accumulate) }
 }
 
@@ -104,13 +106,18 @@ pub(crate) fn gemm_new(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) -> 
         return c;
     }
     let mut c = Vec::with_capacity(m * n);
-    // SAFETY: the capacity holds `m × n` values and overlaps neither input. Without
-    // `read_dst` the `gemm` crate never reads the destination: its first pass over the
-    // depth dimension stores `lhs · rhs` into every one of the `m × n` elements (alpha is
-    // zeroed and the microkernels' "alpha_status 0" path overwrites; `k > 0` here), later
-    // passes add to what it stored (checked in gemm-common 0.19.0, which `=0.19.0` pins:
-    // alpha is reset per column block, partial tiles only store); matrix-vector shapes never
-    // get here. So every element is initialised before `set_len`.
+    // SAFETY: `product`'s contract: the fresh capacity holds `m × n` values and overlaps
+    // neither input (it checks the inputs' sizes itself). `set_len`'s: `m × n` fits the
+    // capacity, and every element is initialised first, although the memory starts
+    // uninitialised, because without `read_dst` the `gemm` crate never reads the
+    // destination: it zeroes alpha, its first pass over the depth dimension stores
+    // `lhs · rhs` into every one of the `m × n` elements (the microkernels' "alpha_status 0"
+    // path, and `gevv` for `k <= 2`, overwrite; `k > 0` here), and later passes add to what
+    // it stored (checked in gemm-common 0.19.0, which `=0.19.0` pins: alpha is reset per
+    // column block, partial tiles only store). The shapes that read or skip the
+    // destination otherwise never get here: the matrix-vector paths (`m` or `n` of 1) and
+    // the small `m · n <= 256` path are below `UNINIT_MIN` or excluded above. If `product`
+    // panics, the length stays 0.
     unsafe {
         product(m, n, k, a, b, c.as_mut_ptr(), false);
         c.set_len(m * n);
@@ -145,9 +152,12 @@ unsafe fn product(
     } else {
         gemm::Parallelism::None
     };
-    // SAFETY: the asserts above keep every element the strides reach — `a` (m × k) and
-    // `b` (k × n), row-major or transposed as `Mat` says — inside its slice; the caller
-    // vouches for `c`.
+    // SAFETY: `a` is read at `i · a_rs + p · a_cs` for `i < m`, `p < k`: `i · k + p`
+    // row-major or `i + p · m` transposed, below `m · k` either way, so inside `a.data` by
+    // the first assert; `b` likewise below `k · n`, inside `b.data` by the second. The
+    // caller vouches for `c` (`m × n` values at row stride `n`, column stride 1, writable,
+    // disjoint from `a` and `b`). The `gemm` crate picks its SIMD kernels by run-time
+    // feature detection, so no target feature is assumed here.
     unsafe {
         gemm::gemm(
             m,
@@ -182,10 +192,9 @@ const SHORT_ROWS: usize = 128;
 /// and a long row-major weight `b` (`k × n`): the forward product of every linear layer.
 /// On CPUs with AVX-512, kernels that stream `b` once, in order (the `gemm` crate first
 /// copies the whole weight into panels, which for a batch of 32 costs more memory traffic
-/// than the arithmetic: 1.64 → 1.10 ms for 32 × 4096 × 512 with the weight out of cache,
-/// on a Sapphire Rapids core): wider than two vectors, `avx512::packed` (the batch rows
-/// packed once, each weight strip copied as its first tile reads it; the same product
-/// 0.96–1.23 ms); narrower, the in-place kernel. Elsewhere the `gemm` crate.
+/// than the arithmetic): wider than two vectors, `avx512::packed` (the batch rows packed
+/// once, each weight strip copied as its first tile reads it); narrower, the in-place
+/// kernel. Elsewhere the `gemm` crate.
 ///
 /// # Panics
 /// If a slice is shorter than its matrix.
@@ -213,8 +222,10 @@ pub(crate) fn gemm_short_by_long(
             c[..n].fill(0.0);
         }
         let mut rows = Vec::with_capacity(k);
-        // SAFETY: `a` holds `k` values, `b` `k × n`, `c` `n` (asserted above); `n` is a
-        // multiple of 16.
+        // SAFETY: `vec_mat_nonzero`'s contract: AVX-512F is present and `n` a multiple of
+        // 16 (both checked in the condition above); with `m == 1` the asserts at the top
+        // give `x` = `a` its `k` values, `w` = `b` its `k` rows of `n` values `n` apart, and
+        // `y` = `c` its `n` values. `c` is a `&mut` borrow, so it overlaps neither input.
         unsafe {
             avx512::vec_mat_nonzero(k, n, a.as_ptr(), b.as_ptr(), n, c.as_mut_ptr(), &mut rows)
         };
@@ -228,10 +239,17 @@ pub(crate) fn gemm_short_by_long(
         let rows = (n > 32).then(|| avx512::PackedRows::new(m, k, a));
         // Rows i0..i1 and columns j0..j1 of `c`.
         let run = |(i0, i1): (usize, usize), (j0, j1): (usize, usize)| {
-            // SAFETY: rows i0..i1 of `a` (m × k, and of its packed copy), columns j0..j1
-            // of `b` (k × n) and that block of `c` (m × n) are inside their slices
-            // (asserted above); `c` is borrowed mutably for the call, and the two halves
-            // below write disjoint blocks of it.
+            // SAFETY: AVX-512F is present (checked in the condition above; `PackedRows::new`
+            // asserts it again). Bounds: `i0 <= i1 <= m` and `j0 <= j1 <= n` (the splits
+            // below cut at a `half` no greater than `m` or `n`), so rows `i0..i1` of `a`
+            // (row stride `k`), columns `j0..j1` of `b` and that block of `c` (row stride
+            // `n`; the kernels' column masks stop at `j1 - j0`) lie inside the slices the
+            // asserts at the top size as `m × k`, `k × n` and `m × n`; `i0` is 0 or a
+            // multiple of 16, so `rows.tile(i0)` is the start of a packed tile, followed by
+            // the packed tiles (`k` steps each) of every row up to `m`. Aliasing: `c`
+            // (through `out`) is touched only here until `run` returns, both `rayon::join`
+            // halves below write disjoint blocks of it (columns `..half` / `half..`, or
+            // rows), and `a`, `b` and the packed rows are only read.
             unsafe {
                 if let Some(rows) = &rows {
                     avx512::packed(
@@ -281,21 +299,17 @@ pub(crate) fn gemm_short_by_long(
 
 /// `a · b` as a new `m × n` row-major matrix, for a tall `a` or a short depth: the weight
 /// and input gradients of a linear layer (`xᵀ · dy`, `W · dyᵀ`) and the patch products of
-/// the convolutions after the first (forward `P · Wᵀ`, backward `dyᵀ · P` and `dy · W`:
-/// conv2/conv3 backward on one Zen 4 core 1.5–1.7 → 0.9–1.1 ms). On CPUs with
-/// AVX-512 the short-by-long kernel, reading `a` in place (row-major or transposed, the
-/// latter from L2: its rows alias in L1) and `b` in one block of depth when it is small,
-/// so that each register tile streams its rows of `a` once, in order, and, strip by strip,
-/// fetching each next tile's rows of `c` for writing while a tile is summed (the output is
-/// fresh memory: without that, the stores wait on memory); elsewhere the `gemm` crate.
-/// Each element is summed by one thread in one order. One AMD EPYC Zen 4 core, side by side with the
-/// `gemm` crate: `xᵀ · dy` for 32 × 4096 × 512 55–76 → 76–82 GFLOP/s, `W · dyᵀ` with the
-/// weight out of cache 71–72 → 76–82. With one small block of depth and several strips
-/// (the weight gradients `xᵀ · dy`, the convolutions' patch gradients `dy · W`) the tiles go
-/// row band by row band, a transposed `a` packed band by band, with no hand-made fetches of
-/// `c` (the band is one sequential stream): on a Sapphire Rapids Xeon (criterion,
-/// 2026-12-04) 90 → 104–110 GFLOP/s on one core, 172 → 204–217 on two; NumPy's OpenBLAS
-/// 0.3.31 ran the same product at 121 and 256 there.
+/// the convolutions after the first (forward `P · Wᵀ`, backward `dyᵀ · P` and `dy · W`).
+/// On CPUs with AVX-512 the short-by-long kernel, reading `a` in place (row-major or
+/// transposed, the latter from L2: its rows alias in L1) and `b` in one block of depth when
+/// it is small, so that each register tile streams its rows of `a` once, in order, and,
+/// strip by strip, fetching each next tile's rows of `c` for writing while a tile is summed
+/// (the output is fresh memory: without that, the stores wait on memory); elsewhere the
+/// `gemm` crate.
+/// Each element is summed by one thread in one order. With one small block of depth and
+/// several strips (the weight gradients `xᵀ · dy`, the convolutions' patch gradients
+/// `dy · W`) the tiles go row band by row band, a transposed `a` packed band by band, with
+/// no hand-made fetches of `c` (the band is one sequential stream).
 ///
 /// # Panics
 /// If a slice is shorter than its matrix.
@@ -316,9 +330,16 @@ pub(crate) fn gemm_tall(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) ->
         let mut c: Vec<f32> = Vec::with_capacity(m * n);
         let out = avx512::SendPtr(c.as_mut_ptr());
         let run = |i0: usize, i1: usize| {
-            // SAFETY: rows i0..i1 of `a` (m × k through its strides, asserted above), `b`
-            // (k × n, `rhs`) and rows i0..i1 of `c` (capacity m × n) are in bounds; the two
-            // halves below write disjoint rows of `c`.
+            // SAFETY: AVX-512F is present (checked in the condition above). `a` is read at
+            // row `i0 + i`, depth `p` as `(i0 + i) · rows + p · depth`: `i · k + p`
+            // row-major or `i + p · m` transposed, below `m · k` (asserted above) for
+            // `i0 + i < i1 <= m`, `p < k`; `rhs` is `k × n` row-major (sliced or built just
+            // above); rows `i0..i1` of `c` lie in its capacity of `m × n`. `c` is still
+            // uninitialised, but with `accumulate` off the kernel only stores in its first
+            // block of depth and later reads back only what it stored. The two
+            // `rayon::join` halves below write disjoint rows (`..half`, `half..m`, with
+            // `half <= m` as `m >= 16`) through `out`, and `c` itself is not touched until
+            // both have returned.
             unsafe {
                 avx512::short_by_long(
                     i1 - i0,
@@ -342,9 +363,13 @@ pub(crate) fn gemm_tall(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) ->
         } else {
             run(0, m);
         }
-        // SAFETY: the kernel's first block of depth stores every element of rows 0..m and
-        // columns 0..n (each row tile, each strip, under masks that cover the tail), and
-        // `accumulate` is off, so it never reads the uninitialised memory.
+        // SAFETY: `m × n` fits the capacity reserved above, and every one of those values
+        // is initialised: `k > 0` (checked above), so `short_by_long` runs a first block of
+        // depth, which with `accumulate` off stores (never loads) every register tile over
+        // rows `0..m` (the halves cover `..half` and `half..m`; `tile_rows_at` only picks
+        // heights for which `run_tile` has a kernel of that height) and every strip of columns
+        // `0..n` (the masks cover the tail strip). Both halves have returned, so no other
+        // thread still writes through `out`.
         unsafe { c.set_len(m * n) };
         return c;
     }
@@ -367,10 +392,10 @@ pub(crate) fn to_bf16(x: f32) -> u16 {
 /// one after the other, as 16 words of 32 bits holding columns `(j, j + 16)` — column `j`
 /// in the upper half, which clearing the lower half leaves as an f32, column `j + 16` in
 /// the lower half, which one shift left makes an f32 (two plain integer operations per 32
-/// weights, no shuffle). Columns past `n` hold zeros. On one AMD EPYC Zen 4 core the
-/// row-major layout read four rows at a time (four interleaved streams 1 KB apart) took an
-/// MDRLAT decision to 2.1–2.5 ms, slower than f32's 1.6–1.8: that CPU's prefetchers follow
-/// one sequential stream much better than four interleaved ones.
+/// weights, no shuffle). Columns past `n` hold zeros. On an AMD EPYC Zen 4 core the
+/// row-major layout read four rows at a time (four interleaved streams 1 KB apart) made an
+/// MDRLAT decision slower than with f32 weights: that CPU's prefetchers follow one
+/// sequential stream much better than four interleaved ones.
 #[derive(Debug, Clone)]
 pub(crate) struct Bf16Matrix {
     k: usize,
@@ -429,8 +454,11 @@ impl Bf16Matrix {
         assert!(x.len() >= self.k && y.len() >= self.n, "Bf16Matrix::vec_mul: short slices");
         #[cfg(target_arch = "x86_64")]
         if avx512::available() {
-            // SAFETY: AVX-512F is available; `x` and `y` hold `k` and `n` values (asserted)
-            // and `words` the whole padded layout (built by `new`).
+            // SAFETY: AVX-512F is present (`avx512::available()` just above); `x` and `y`
+            // hold at least `k` and `n` values (asserted above); `words` holds exactly the
+            // layout's `k.div_ceil(4) · n.div_ceil(32) · 64` words, as `new` built it for
+            // this `k` and `n` (the fields are private and never changed after). `y` is a
+            // `&mut` borrow, disjoint from `x` and `words`.
             unsafe {
                 avx512::vec_by_bf16(self.k, self.n, x.as_ptr(), self.words.as_ptr(), y.as_mut_ptr())
             };
@@ -480,7 +508,7 @@ pub(crate) struct Conv16 {
 ///
 /// `next` (may be empty) is fetched into L2 a few lines per step while this image is
 /// convolved: the caller's next image, whose first read from memory would otherwise stall
-/// the copy that pads it (~24 µs of the ~49 µs the convolution takes on a Zen 4 core).
+/// the copy that pads it.
 ///
 /// # Panics
 /// If the kernel does not fit the padded image or a slice is short.
@@ -497,8 +525,13 @@ pub(crate) fn conv16(g: &Conv16, img: &[f32], wt: &[f32], out: &mut [f32], next:
     assert_eq!(out.len(), g.out_rows * g.out_cols * 16, "conv16 output size");
     #[cfg(target_arch = "x86_64")]
     if avx512::available() {
-        // SAFETY: AVX-512F is available; every pixel the kernel reads is inside `img` and every
-        // output inside `out` (asserted above).
+        // SAFETY: AVX-512F is present (`avx512::available()` just above), and the asserts
+        // above are the kernel's geometry contract: a non-empty geometry whose last window
+        // (`(out_rows - 1) · stride + kh` rows, `(out_cols - 1) · stride + kw` columns)
+        // fits the `rows × cols` image, `img` holding `channels × rows × cols` values, `wt`
+        // one 16-float vector per kernel value and `out` one per output position. So every
+        // pixel, weight and output the kernel reaches is inside its slice. `out` is a
+        // `&mut` borrow, disjoint from `img` and `wt`; `next` is only prefetched.
         unsafe { avx512::conv16(g, img.as_ptr(), wt.as_ptr(), out.as_mut_ptr(), next) };
         return true;
     }
@@ -509,8 +542,8 @@ pub(crate) fn conv16(g: &Conv16, img: &[f32], wt: &[f32], out: &mut [f32], next:
 /// 16-float vector per kernel value): `dwt[(ch·kh + ky)·kw + kx, 0..16] += Σ_{y,x}
 /// img[ch][y·s + ky][x·s + kx] · dy[y·out_cols + x, 0..16]`, each sum over the output
 /// positions in order. No patches: the first depth layer's patches are 320 × 560 floats an
-/// image (700 KB), which the `gemm` crate then packs again — 27 GFLOP/s on one Zen 4 core,
-/// against ~80 for this. `false` (nothing done) where the CPU lacks AVX-512.
+/// image (700 KB), which the `gemm` crate then packs again. `false` (nothing done) where the
+/// CPU lacks AVX-512.
 ///
 /// `next` (may be empty) is fetched into L2 meanwhile, as in [`conv16`].
 ///
@@ -535,8 +568,12 @@ pub(crate) fn conv16_weight_grad(
     assert_eq!(dy.len(), g.out_rows * g.out_cols * 16, "conv16 output size");
     #[cfg(target_arch = "x86_64")]
     if avx512::available() {
-        // SAFETY: AVX-512F is available; every pixel read is inside `img`, every output
-        // gradient inside `dy` and every weight gradient inside `dwt` (asserted above).
+        // SAFETY: AVX-512F is present (`avx512::available()` just above), and the asserts
+        // above are the kernel's geometry contract, as in `conv16`: the last window fits
+        // the image, `img` holds `channels × rows × cols` values, `dy` one 16-float vector
+        // per output position and `dwt` one per kernel value, so every pixel, output
+        // gradient and weight gradient the kernel reaches is inside its slice. `dwt` is a
+        // `&mut` borrow, disjoint from `img` and `dy`; `next` is only prefetched.
         unsafe {
             avx512::conv16_weight_grad(g, img.as_ptr(), dy.as_ptr(), dwt.as_mut_ptr(), next);
         };
@@ -556,17 +593,13 @@ mod avx512 {
     //! next block (its rows of this call's columns) is fetched into L2 a few lines per
     //! step of the register tiles, and each strip's successor within the block into L1.
     //! Without the L2 stream the kernel waits on memory: a strip's rows lie one weight row
-    //! apart, three cache lines each, which the hardware prefetchers do not follow (32 ×
-    //! 4096 × 512 with the weight out of cache, one AMD EPYC Zen 4 core: 55 → 70–80
-    //! GFLOP/s; a register tile with its operands in L1 runs at ~90 there, and at 211–228
-    //! on a Sapphire Rapids core, whose two full-width FMA units the packed kernel feeds).
+    //! apart, three cache lines each, which the hardware prefetchers do not follow.
     use std::arch::x86_64::*;
 
     /// A register tile's sums (`rows`: an iterator over its rows of vectors) added to
     /// (`t.add`) or stored into `c`: row `r`, vector `v` at `t.c + r · t.ldc + 16 v` under
     /// `t.masks[v]` (nothing where a mask is empty). A macro, not a function: a function
-    /// would take the accumulators' address and keep them in memory through the tile's loop
-    /// (the forward kernel at 63 instead of 136 GFLOP/s).
+    /// would take the accumulators' address and keep them in memory through the tile's loop.
     macro_rules! store {
         ($rows:expr, $t:expr) => {
             for (r, acc) in $rows.enumerate() {
@@ -580,10 +613,20 @@ mod avx512 {
                     // vector's first column does.
                     let at = cp.wrapping_add(16 * v);
                     let value = if $t.add {
+                        // SAFETY: AVX-512F is required by both kernels that expand this
+                        // macro (`tile`, `packed_tile`). The masked load reads only the
+                        // lanes under `mask` (masked-off lanes are not accessed and cannot
+                        // fault): columns of row `r` of the tile, whose rows (`R`, or the
+                        // first `t.rows`) and masked columns the kernel's caller guarantees
+                        // lie in `c`. With `add` they were initialised before, by the
+                        // caller (`accumulate`) or by an earlier block of depth.
                         _mm512_add_ps(unsafe { _mm512_maskz_loadu_ps(mask, at) }, sum)
                     } else {
                         sum
                     };
+                    // SAFETY: as for the load: the store writes only the lanes under `mask`,
+                    // in row `r` of the tile's block of `c`, which the caller guarantees is
+                    // in bounds, disjoint from `a` and `b`, and written by no other thread.
                     unsafe { _mm512_mask_storeu_ps(at, mask, value) };
                 }
             }
@@ -598,7 +641,8 @@ mod avx512 {
     /// every row tile of `a` passes over it).
     pub(super) const KC: usize = 128;
 
-    /// A pointer the two halves of a product may share (they write disjoint columns).
+    /// A pointer the two halves of a product may share (they write disjoint columns or
+    /// rows).
     #[derive(Clone, Copy)]
     pub(super) struct SendPtr(pub(super) *mut f32);
 
@@ -608,10 +652,14 @@ mod avx512 {
             self.0
         }
     }
-    // SAFETY: only used to write disjoint columns from the threads of one `rayon::join`,
-    // while the slice it points into is borrowed mutably by the caller.
+    // SAFETY: a `SendPtr` only carries an address; every access through it is an unsafe
+    // kernel call in `gemm_short_by_long` or `gemm_tall`, where it points into an output
+    // (a `&mut [f32]`, or a `Vec`'s reserved capacity) that nothing else touches until the
+    // `rayon::join` sharing it has returned, and whose two halves write disjoint blocks
+    // (columns or rows) of it. Moving it to another thread therefore races with nothing.
     unsafe impl Send for SendPtr {}
-    // SAFETY: as above.
+    // SAFETY: a `&SendPtr` only lets a thread copy the address out (`get`); the writes
+    // through that address are disjoint between the threads, as argued for `Send` above.
     unsafe impl Sync for SendPtr {}
 
     /// AVX-512F is there and the portable kernels are not forced (see
@@ -630,8 +678,7 @@ mod avx512 {
     /// `y (n) += x (k) · w (k × n bfloat16 in the layout of [`super::Bf16Matrix`])`. The
     /// weight is streamed once, sequentially; each pair of column vectors of `y` is updated
     /// in L1 once per four rows. (The same loop over f32 weights was measured slower than
-    /// the `gemm` crate's vector-matrix path, 1.52 vs 1.44 ms for an MDRLAT decision on a
-    /// Sapphire Rapids core: f32 keeps that.)
+    /// the `gemm` crate's vector-matrix path for an MDRLAT decision: f32 keeps that.)
     ///
     /// # Safety
     /// AVX-512F must be available; `x` must hold `k` floats, `y` `n`, and `w` the layout's
@@ -649,18 +696,28 @@ mod avx512 {
         let mut w = w;
         for g in 0..k.div_ceil(4) {
             let i = g * 4;
-            // SAFETY: `x[i + r]` for i + r < k (padded rows have zero weights and inputs).
             let xv: [__m512; 4] = std::array::from_fn(|r| {
+                // SAFETY: `x` is read only at `i + r < k`, inside the `k` floats the caller
+                // guarantees (the padded rows past `k` get 0.0, beside their zero weights).
                 _mm512_set1_ps(if i + r < k { unsafe { *x.add(i + r) } } else { 0.0 })
             });
             for b in 0..blocks {
                 let j = b * 32;
                 let (lo, hi) = (mask(n - j), mask(n.saturating_sub(j + 16)));
-                // SAFETY: the masks keep `y` accesses below column `n`; `w` advances by the
-                // 64 words of one block of one group, within the layout's size.
+                // SAFETY: the CPU has AVX-512F (this function's contract). `j < n` (as
+                // `b < n.div_ceil(32)`), so `y.add(j)` is inside `y`, and the masks `lo`
+                // and `hi` keep every lane loaded or stored below column `n`, inside the `n`
+                // floats the caller guarantees. `w` is at block `b` of group `g`: 4 rows of
+                // 16 words, read as `w.add(r · 16)` for `r < 4`; it advances by those 64
+                // words per block, `k.div_ceil(4) · blocks` times in all, which is the
+                // layout's size the caller guarantees (ending one past its end). Where
+                // `n - j < 16`, `hi` is empty and nothing is accessed at `j + 16`; that
+                // pointer may lie past `y`'s `n` floats, so it is formed with
+                // `wrapping_add`, which (unlike `add`) allows it.
                 unsafe {
+                    let y_hi = y.wrapping_add(j + 16);
                     let mut acc_lo = _mm512_maskz_loadu_ps(lo, y.add(j));
-                    let mut acc_hi = _mm512_maskz_loadu_ps(hi, y.add(j + 16));
+                    let mut acc_hi = _mm512_maskz_loadu_ps(hi, y_hi);
                     for (r, xr) in xv.iter().enumerate() {
                         let v = _mm512_loadu_si512(w.add(r * 16).cast());
                         let first = _mm512_castsi512_ps(_mm512_and_si512(v, high));
@@ -669,7 +726,7 @@ mod avx512 {
                         acc_hi = _mm512_fmadd_ps(*xr, second, acc_hi);
                     }
                     _mm512_mask_storeu_ps(y.add(j), lo, acc_lo);
-                    _mm512_mask_storeu_ps(y.add(j + 16), hi, acc_hi);
+                    _mm512_mask_storeu_ps(y_hi, hi, acc_hi);
                     w = w.add(64);
                 }
             }
@@ -684,20 +741,18 @@ mod avx512 {
     /// no longer turns its outputs into NaN). `rows` is scratch for the rows read. Each group's weight
     /// rows are fetched while the group two before it is summed: the rows a ReLU leaves are
     /// scattered, 2 KB streams each, too short for the hardware prefetchers to follow. They
-    /// are fetched into L2, not L1 (`_MM_HINT_T2`): on Zen 4 a 4096 → 512 layer with 55 %
-    /// of its inputs zero at random took 154–189 µs instead of 254–263 with its weights out
-    /// of cache (criterion, `zeros0.55-scattered/mem`), and `mdrlat ros`'s MDRLAT decision
-    /// (100 ms apart) 0.81–0.83 ms instead of 0.87–0.97; back-to-back decisions within the
-    /// noise; not measured on the Xeon.
+    /// are fetched into L2, not L1 (`_MM_HINT_T2`): on Zen 4 that was the faster of the two
+    /// with the weights out of cache (criterion, `zeros0.55-scattered/mem`), and for
+    /// `mdrlat ros`'s MDRLAT decisions spaced apart in time (back to back, within the noise;
+    /// not measured on the Xeon).
     ///
     /// Where at least [`DENSE_SHARE`] of `x` is non-zero (the bilinear fusion's `vec(d lᵀ)`
     /// has no zeros) every row is read instead, one after another ([`add_row`]; its
     /// zero rows add `0 · w` as the `gemm` crate's do, non-finite weights included): on
     /// Zen 4 a single sequential stream is what its prefetchers follow, and both the gaps
-    /// of skipped rows and rows read side by side (four or two) cost 2–3x (criterion,
-    /// `vector_matrix_bytes`, 8192 → 512: 0.48–0.50 ms one row at a time, 1.1–1.5 ms four
-    /// rows or two; a 4096 → 512 layer breaks even between skipping and reading every row
-    /// at 30–40 % zeros).
+    /// of skipped rows and rows read side by side (four or two) are slower than one row at
+    /// a time (criterion, `vector_matrix_bytes`; a 4096 → 512 layer breaks even between
+    /// skipping and reading every row at 30–40 % zeros).
     ///
     /// # Safety
     /// AVX-512F must be available; `n` must be a multiple of 16; `x` must hold `k` floats,
@@ -718,14 +773,20 @@ mod avx512 {
         rows.clear();
         // The non-zero inputs of each 16 (NaN counts as non-zero: it must reach `y`).
         let nonzero = |at: usize| {
-            // SAFETY: the mask keeps the load within the `k` floats of `x`.
+            // SAFETY: the CPU has AVX-512F (this function's contract); `at` is only ever a
+            // step of `(0..k).step_by(16)`, so `at < k`, `x.add(at)` is inside the `k`
+            // floats the caller guarantees, and `mask(k - at)` keeps every lane read below
+            // `k`.
             let v = unsafe { _mm512_maskz_loadu_ps(mask(k - at), x.add(at)) };
             _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(v, _mm512_setzero_ps())
         };
         let count: u32 = (0..k).step_by(16).map(|at| nonzero(at).count_ones()).sum();
         if count as f32 >= DENSE_SHARE * k as f32 {
             for r in 0..k {
-                // SAFETY: row `r < k` of `w` and `x[r]` are inside the caller's matrices.
+                // SAFETY: `add_row`'s contract, from this function's: AVX-512F, `n` a
+                // multiple of 16, and, as `r < k`, `x.add(r)` one of `x`'s `k` floats and
+                // `w.add(r · ldw)` the start of row `r` of `w`, `n` floats long; `y` holds
+                // `n` floats.
                 unsafe { add_row(n, *x.add(r), w.add(r * ldw), y) };
             }
             return;
@@ -738,13 +799,22 @@ mod avx512 {
             }
         }
         let vectors = n / 16;
+        // SAFETY: `row` is only called with indices from `rows`, each `at + lane` for a
+        // lane set in `nonzero(at)`: its masked-off lanes load as 0.0 and compare equal to
+        // zero, so every index is below `k` and `w.add(i · ldw)` starts a row of `w`.
         let row = |i: usize| unsafe { w.add(i * ldw) };
         let groups = rows.chunks(4);
         let count = groups.len();
         for (g, group) in groups.enumerate() {
             let next: &[usize] = if g + AHEAD < count { &rows[(g + AHEAD) * 4..] } else { &[] };
             let next = &next[..next.len().min(4)];
-            // SAFETY (this block): every row index is below `k`, every column below `n`.
+            // SAFETY: the CPU has AVX-512F (this function's contract). Every row index in
+            // `group` and `next` is below `k` (see `row`), so `x.add(r)` is inside `x` and
+            // `row(r)` starts one of `w`'s rows of `n` floats; `j = 16 v` with
+            // `v < n / 16` (`n` a multiple of 16) keeps `j + 16 <= n`, so every full-width
+            // load of a row of `w` and load and store of `y` is in bounds (prefetches never
+            // fault). A group of fewer than four goes row by row to `add_row`, whose
+            // contract is this function's.
             unsafe {
                 if let &[r0, r1, r2, r3] = group {
                     let (x0, x1, x2, x3) = (
@@ -791,7 +861,9 @@ mod avx512 {
     unsafe fn add_row(n: usize, xr: f32, w_row: *const f32, y: *mut f32) {
         let xr = _mm512_set1_ps(xr);
         for j in (0..n).step_by(16) {
-            // SAFETY: `j + 16 <= n`, inside both rows.
+            // SAFETY: the CPU has AVX-512F (this function's contract); `j` steps by 16
+            // through `0..n` and `n` is a multiple of 16, so `j + 16 <= n` and both 16-float
+            // accesses stay inside the `n` floats of `y` and of `w_row`.
             unsafe {
                 let acc = _mm512_loadu_ps(y.add(j));
                 _mm512_storeu_ps(y.add(j), _mm512_fmadd_ps(_mm512_loadu_ps(w_row.add(j)), xr, acc));
@@ -856,10 +928,14 @@ mod avx512 {
                 while ic < m {
                     let rows = tile_rows_at(tile_rows, vectors, m - ic);
                     let (a_band, lda_band, step_band) = if step == 1 {
+                        // SAFETY: element `(ic, pc)` of `a` (strides `lda`, `step == 1`),
+                        // with `ic < m` and `pc == 0 < k`: in the caller's matrix.
                         (unsafe { a.add(ic * lda + pc) }, lda, 1)
                     } else {
                         for p in 0..kk {
                             for r in 0..rows {
+                                // SAFETY: element `(ic + r, pc + p)` of `a`, with
+                                // `ic + r < m` (`rows <= m - ic`) and `pc + p < k`.
                                 pack[p * rows + r] =
                                     unsafe { *a.add((ic + r) * lda + (pc + p) * step) };
                             }
@@ -872,15 +948,17 @@ mod avx512 {
                         // This band's next strip of `b`, or the first again, to L1. `c` is
                         // not fetched for writing by hand here: the L2 streamer follows the
                         // band, and the explicit fetches cost more than they saved (criterion,
-                        // one Sapphire Rapids core: 96–100 GFLOP/s with them, 104–110 without).
+                        // on a Sapphire Rapids core).
                         let b_next = if jc + strip < n { jc + strip } else { 0 };
                         let t = Tile {
                             k: kk,
                             a: a_band,
                             lda: lda_band,
                             step: step_band,
+                            // SAFETY: element `(pc, jc)` of `b`, with `pc < k`, `jc < n`.
                             b: unsafe { b.add(pc * ldb + jc) },
                             ldb,
+                            // SAFETY: element `(ic, jc)` of `c`, with `ic < m`, `jc < n`.
                             c: unsafe { c.add(ic * ldc + jc) },
                             ldc,
                             masks,
@@ -888,6 +966,14 @@ mod avx512 {
                             prefetch: Some(b.wrapping_add(pc * ldb + b_next)),
                             c_next: None,
                         };
+                        // SAFETY: `t` meets `tile`'s contract for `rows` (`<= m - ic`) rows
+                        // and `vectors` vectors: the band's rows of `a` in place, or packed
+                        // in `pack` (`[kk][rows]`: row stride 1, depth stride `rows`; not
+                        // touched again until the call returns), `kk` steps from depth `pc`
+                        // (`pc + kk <= k`), columns from `jc` of `b` and `c` under masks
+                        // cut at `n` for this tile width. AVX-512F and `c` disjoint from
+                        // `a` and `b` are this function's contract; `prefetch` is only
+                        // prefetched.
                         unsafe { run_tile(vectors, rows, &t, &mut Ahead::none()) };
                         jc += strip;
                     }
@@ -910,9 +996,7 @@ mod avx512 {
                 // One strip and one block (the input gradient `W · dyᵀ`): `b` stays in L2
                 // and each tile's rows of `a` are read once, from memory, so the L2
                 // prefetcher is handed the next tile's rows instead — 12 weight rows of
-                // 2 KB, streams too short for the hardware prefetchers to pick up (one
-                // Sapphire Rapids core, 32 × 4096 → 512 out of cache: 69–70 → 87–92
-                // GFLOP/s).
+                // 2 KB, streams too short for the hardware prefetchers to pick up.
                 let stream_a = wide && step == 1 && n <= strip && pc + kk >= k;
                 let mut ic = 0;
                 while ic < m {
@@ -924,11 +1008,15 @@ mod avx512 {
                     }
                     let t = Tile {
                         k: kk,
+                        // SAFETY: element `(ic, pc)` of `a` (strides `lda`, `step`), with
+                        // `ic < m`, `pc < k`.
                         a: unsafe { a.add(ic * lda + pc * step) },
                         lda,
                         step,
+                        // SAFETY: element `(pc, jc)` of `b`, with `pc < k`, `jc < n`.
                         b: unsafe { b.add(pc * ldb + jc) },
                         ldb,
+                        // SAFETY: element `(ic, jc)` of `c`, with `ic < m`, `jc < n`.
                         c: unsafe { c.add(ic * ldc + jc) },
                         ldc,
                         masks,
@@ -937,6 +1025,12 @@ mod avx512 {
                         c_next: (c_ahead && ic + rows < m)
                             .then(|| c.wrapping_add((ic + rows) * ldc + jc).cast_const()),
                     };
+                    // SAFETY: `t` meets `tile`'s contract for `rows` (`<= m - ic`) rows and
+                    // `vectors` vectors: rows from `ic` of `a` in place, `kk` steps from
+                    // depth `pc` (`pc + kk <= k`), columns from `jc` of `b` and `c` under
+                    // masks cut at `n` for this tile width. AVX-512F and `c` disjoint from
+                    // `a` and `b` are this function's contract; `prefetch`, `c_next` and
+                    // `ahead` are only prefetched.
                     unsafe { run_tile(vectors, rows, &t, &mut ahead) };
                     ic += rows;
                 }
@@ -963,10 +1057,14 @@ mod avx512 {
     /// One register tile of [`short_by_long`], `rows` × `vectors` vectors.
     ///
     /// # Safety
-    /// As [`tile`].
+    /// As [`tile`] (or [`column`], for one vector) with `R = rows` and `V = vectors`.
     #[target_feature(enable = "avx512f")]
     #[inline]
     unsafe fn run_tile(vectors: usize, rows: usize, t: &Tile, ahead: &mut Ahead) {
+        // SAFETY: each arm's kernel has `V = vectors` (3, 2, or one vector for the rest)
+        // and `R = rows`, or, in the fallback arms, `R = 1 <= rows`: it touches no row,
+        // column or depth step beyond those the caller guarantees for a `rows × vectors`
+        // tile. AVX-512F is this function's contract too.
         unsafe {
             match (vectors, rows) {
                 (3, 8) => tile::<8, 3>(t, ahead),
@@ -1009,8 +1107,11 @@ mod avx512 {
             let mut data = Aligned::new(tiles * ROWS * k);
             for t in 0..tiles {
                 let rows = ROWS.min(m - t * ROWS);
-                // SAFETY: AVX-512F is available (asserted); rows t·8.. of `a` hold `rows × k`
-                // values (asserted above) and tile t of `data` holds `k × 8`.
+                // SAFETY: AVX-512F is present (asserted above). `rows = min(8, m - 8t)`, so
+                // rows `8t..8t + rows` of `a` are the `rows × k` values from `8t · k`, inside
+                // the `m × k` asserted above; tile `t` of `data` is the `k × 8` floats from
+                // `8t · k`, inside its `tiles × 8 × k`. `data` is a fresh allocation,
+                // disjoint from `a`.
                 unsafe {
                     transpose_rows(
                         a.as_ptr().add(t * ROWS * k),
@@ -1052,9 +1153,12 @@ mod avx512 {
         while p0 < k {
             let kr = (k - p0).min(16);
             let m = mask(kr);
-            // SAFETY: row i < rows, columns p0.. under the mask are inside `src`.
             let r: [__m512; ROWS] = std::array::from_fn(|i| {
                 if i < rows {
+                    // SAFETY: the CPU has AVX-512F (this function's contract); `i < rows`,
+                    // so row `i` of `src` is `k` floats from `i · k`, and `m = mask(kr)`,
+                    // `kr = min(16, k - p0)`, keeps the lanes read at columns
+                    // `p0..p0 + kr <= k`: inside the `rows × k` the caller guarantees.
                     unsafe { _mm512_maskz_loadu_ps(m, src.add(i * k + p0)) }
                 } else {
                     _mm512_setzero_ps()
@@ -1101,7 +1205,10 @@ mod avx512 {
                 out[q + 6] = _mm512_shuffle_f32x4::<0xDD>(x2, x3);
             }
             for (q, &v) in out.iter().enumerate().take(kr.div_ceil(2)) {
-                // SAFETY: steps p0 + 2q (and p0 + 2q + 1 where it exists) are inside `dst`.
+                // SAFETY: `q < kr.div_ceil(2)`, so step `p0 + 2q < k` and `at` is inside
+                // `dst`'s `k × 8`; the full 16-float store covers steps `p0 + 2q` and
+                // `p0 + 2q + 1`, both below `k` when `2q + 1 < kr`, and otherwise the mask
+                // `0x00FF` stores only step `p0 + 2q`'s 8 floats.
                 unsafe {
                     let at = dst.add((p0 + 2 * q) * ROWS);
                     if 2 * q + 1 < kr {
@@ -1122,8 +1229,7 @@ mod avx512 {
     /// rows lie one weight row apart — 2 KB for 512 columns — and fall in six sets of L1: a
     /// 128-row strip does not stay there between row tiles.) Over the block, the next
     /// block's rows are handed to the L2 prefetcher in address order, which its streamer
-    /// follows. One Sapphire Rapids core, side by side with [`short_by_long`], 32 × 512 ×
-    /// 4096: 103–107 → 140–148 GFLOP/s with the weight in cache, 91–97 → 109–119 out of it.
+    /// follows.
     ///
     /// # Safety
     /// AVX-512F must be available; `a` must hold the packed tiles of `m` rows and `k`
@@ -1160,18 +1266,29 @@ mod avx512 {
                     let ic = t * ROWS;
                     let tile = PackedTile {
                         k: kk,
-                        // SAFETY (here and below): tile t's block pc of the packed rows,
-                        // and row ic, column jc of `c`, are inside their matrices.
+                        // SAFETY: tile `t < m.div_ceil(8)` of the packed rows starts at
+                        // `8t · k`, and its depth step `pc < k` at `8 pc` within it: inside
+                        // the packed tiles of `m` rows and `k` steps the caller guarantees.
                         a: unsafe { a.add(t * ROWS * k + pc * ROWS) },
                         b: strip.as_mut_ptr(),
                         src: b.wrapping_add(pc * ldb + jc),
                         ldb,
+                        // SAFETY: element `(ic, jc)` of `c`, with `ic = 8t < m`, `jc < n`.
                         c: unsafe { c.add(ic * ldc + jc) },
                         ldc,
                         rows: ROWS.min(m - ic),
                         masks,
                         add,
                     };
+                    // SAFETY: `tile` meets `packed_tile`'s contract: `kk <= PKC` steps of the
+                    // tile's packed rows from `tile.a`; `strip`, this call's own buffer of
+                    // `PKC × 48` floats, 64-byte aligned (`Aligned`), whose rows `0..kk` the
+                    // first row tile (`t == 0`, `FIRST`) writes for this strip and block
+                    // before the others read them; with `FIRST`, `src` at row `pc`, column
+                    // `jc` of `b`, with `kk` rows of valid columns under `masks` (cut at
+                    // `n`); `rows <= m - ic` rows of `c` from row `ic` under the same masks.
+                    // AVX-512F and `c` disjoint from `a` and `b` are this function's
+                    // contract; `ahead` is only prefetched.
                     unsafe {
                         if t == 0 {
                             packed_tile::<true>(&tile, &mut ahead);
@@ -1243,7 +1360,10 @@ mod avx512 {
                     return;
                 }
                 let at = self.row.wrapping_add(16 * self.line);
-                // SAFETY: a prefetch never faults, whatever the address.
+                // SAFETY: `_mm_prefetch` (SSE, in the x86_64 baseline) is a hint: it never
+                // faults and accesses no memory architecturally, whatever the address; `at`
+                // and `row` are formed with `wrapping_add`, so they may run past the weight
+                // (or start from the null of `Ahead::none`) without UB.
                 unsafe { _mm_prefetch::<_MM_HINT_T1>(at.cast::<i8>()) };
                 self.left -= 1;
                 self.line += 1;
@@ -1258,6 +1378,16 @@ mod avx512 {
     /// 8 rows × 48 columns from packed operands (`FIRST`: reading the strip in place and
     /// packing it); the first `rows` rows and the columns under `masks` are added to (or
     /// stored into) `c`.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F. `t.a` must be valid for reads of the tile's `t.k × 8`
+    /// packed floats (`[k][8]`); `t.b` must be 64-byte aligned and valid for `t.k × 48`
+    /// floats, written here with `FIRST` and read otherwise; with `FIRST`, `t.src` must be
+    /// valid for reads of the columns under `t.masks` in each of `t.k` rows `t.ldb` apart;
+    /// `t.c` must be valid for writes (and, with `t.add`, reads of initialised values) of
+    /// the columns under `t.masks` in its first `t.rows` (at most 8) rows, `t.ldc` apart,
+    /// accessed by no other thread and overlapping none of the others. `ahead` may point
+    /// anywhere (it is only prefetched).
     #[target_feature(enable = "avx512f")]
     #[inline]
     unsafe fn packed_tile<const FIRST: bool>(t: &PackedTile, ahead: &mut Ahead) {
@@ -1265,8 +1395,12 @@ mod avx512 {
         let (mut a, mut b, mut src) = (t.a, t.b, t.src);
         macro_rules! step {
             () => {{
-                // SAFETY: `a` and `b` stay inside the packed `[k][8]` and `[k][48]`
-                // buffers (k steps); `src` reads under the strip's masks only.
+                // SAFETY: the CPU has AVX-512F (this function's contract). The loops below
+                // run `t.k` steps in all; at step `p < t.k`, `b` is `t.b + 48 p`, row `p`
+                // of the strip buffer: in bounds, and 64-byte aligned (the buffer is, and 48
+                // floats are 3 lines) as the aligned loads and stores at `b`, `b + 16`,
+                // `b + 32` need. `src` (formed with `wrapping_add`) is read only under the
+                // strip's masks, in row `p` of the strip the caller vouches for.
                 let bv = unsafe {
                     if FIRST {
                         let v = [
@@ -1284,12 +1418,18 @@ mod avx512 {
                     }
                 };
                 for (r, acc) in acc.iter_mut().enumerate() {
+                    // SAFETY: `r < 8`, and `a` is `t.a + 8 p` at step `p < t.k`: inside the
+                    // packed `[k][8]`.
                     let x = _mm512_set1_ps(unsafe { *a.add(r) });
                     for (acc, &bv) in acc.iter_mut().zip(&bv) {
                         *acc = _mm512_fmadd_ps(x, bv, *acc);
                     }
                 }
+                // SAFETY: after step `p < t.k`, `a` is at most `t.k · 8` floats past `t.a`:
+                // inside the packed rows, or one past the caller's `[k][8]`.
                 a = unsafe { a.add(ROWS) };
+                // SAFETY: likewise at most `t.k · 48` floats past `t.b`: inside the strip
+                // buffer, or one past its `t.k × 48` floats.
                 b = unsafe { b.add(STRIP) };
             }};
         }
@@ -1331,23 +1471,41 @@ mod avx512 {
     }
 
     /// `R` rows × one vector of columns (under `masks[0]`).
+    ///
+    /// # Safety
+    /// As [`tile`] with `V = 1`: the CPU must have AVX-512F; `t.masks[0]` must be non-empty;
+    /// `t.a` must be valid for reads at `r · t.lda + p · t.step` (`r < R`, `p < t.k`), `t.b`
+    /// at the columns under `t.masks[0]` of its rows `p < t.k`, `t.ldb` apart, and `t.c` for
+    /// writes (and, with `t.add`, reads of initialised values) at those columns of its rows
+    /// `r < R`, `t.ldc` apart, accessed by no other thread and overlapping neither `a` nor
+    /// `b`.
     #[target_feature(enable = "avx512f")]
     unsafe fn column<const R: usize>(t: &Tile) {
         let mut acc = [_mm512_setzero_ps(); R];
         for p in 0..t.k {
+            // SAFETY: row `p < t.k` of `t.b` starts in bounds (its first column is under
+            // the non-empty `masks[0]`), and the masked load reads only the columns under
+            // `masks[0]`, which the caller guarantees.
             let bv = unsafe { _mm512_maskz_loadu_ps(t.masks[0], t.b.add(p * t.ldb)) };
             for (r, acc) in acc.iter_mut().enumerate() {
+                // SAFETY: element `(r, p)` of `t.a`, with `r < R`, `p < t.k`.
                 let x = _mm512_set1_ps(unsafe { *t.a.add(r * t.lda + p * t.step) });
                 *acc = _mm512_fmadd_ps(x, bv, *acc);
             }
         }
         for (r, &sum) in acc.iter().enumerate() {
+            // SAFETY: row `r < R` of `t.c` starts in bounds (its first column is under the
+            // non-empty `masks[0]`).
             let at = unsafe { t.c.add(r * t.ldc) };
             let value = if t.add {
+                // SAFETY: the masked load reads only row `r`'s columns under `masks[0]`,
+                // which the caller guarantees and, with `add`, initialised before.
                 _mm512_add_ps(unsafe { _mm512_maskz_loadu_ps(t.masks[0], at) }, sum)
             } else {
                 sum
             };
+            // SAFETY: the masked store writes only those columns, which no other thread
+            // accesses and which overlap neither `a` nor `b` (the caller's contract).
             unsafe { _mm512_mask_storeu_ps(at, t.masks[0], value) };
         }
     }
@@ -1377,18 +1535,25 @@ mod avx512 {
             while x < g.out_cols {
                 // Tiles of 20 positions: the depth layer's whole output row (20 columns) in 20
                 // independent sums, where a 16 + 4 split left the 4-wide tile waiting on FMA
-                // latency. Same sums; a forward of 16 images' streams 1.7 → 1.6 ms and
-                // depth-only steps 17.9 / 18.8 → 17.3 / 17.7 ms in alternating pairs on a
-                // Sapphire Rapids Xeon (2026-12-04).
+                // latency. Same sums.
                 let n =
                     [20, 16, 8, 4, 2, 1].into_iter().find(|&r| r <= g.out_cols - x).unwrap_or(1);
+                // SAFETY: pixel `(0, y · stride, x · stride)` of the image: `y < out_rows` and
+                // `x < out_cols`, and the caller's checks put the last window inside
+                // `rows × cols`, so that row and column exist.
                 let base = unsafe { img.add(y * g.stride * g.cols + x * g.stride) };
+                // SAFETY: output position `y · out_cols + x < out_rows · out_cols`, whose 16
+                // floats are inside `out`.
                 let o = unsafe { out.add((y * g.out_cols + x) * 16) };
                 // The paper's stride (8) as a constant: each tile's pixels are then fixed
                 // offsets from one pointer, where a stride known only at run time made the
                 // compiler step a pointer from pixel to pixel (16 dependent adds a kernel
-                // column). Same sums; depth-only steps 15.0–15.2 → 14.1–14.7 ms in
-                // alternating pairs on a Sapphire Rapids Xeon.
+                // column). Same sums.
+                // SAFETY: `conv16_tile`'s contract: AVX-512F and the checked geometry are
+                // this function's; `base` and `o` are output row `y`'s position `x` (above),
+                // and the arm's `R = n <= out_cols - x` (it is chosen so), so the tile's
+                // positions and windows stay inside `out` and the image; `S = 8` only in the
+                // arms where `g.stride == 8`, else 0 (the geometry's stride).
                 unsafe {
                     match (n, g.stride) {
                         (20, 8) => conv16_tile::<20, 8>(g, base, wt, o, ahead),
@@ -1434,8 +1599,17 @@ mod avx512 {
                 let mut kx = 0;
                 while kx < g.kw {
                     let n = (g.kw - kx).min(16);
+                    // SAFETY: pixel `(ch, ky, kx)` of the image: `ch < channels`,
+                    // `ky < kh <= rows` and `kx < kw <= cols` (the caller's checks).
                     let base = unsafe { img.add((ch * g.rows + ky) * g.cols + kx) };
+                    // SAFETY: kernel value `(ch · kh + ky) · kw + kx`, whose 16 floats are
+                    // inside `dwt`.
                     let out = unsafe { dwt.add(((ch * g.kh + ky) * g.kw + kx) * 16) };
+                    // SAFETY: `weight_grad_row`'s contract: AVX-512F and the checked
+                    // geometry are this function's; `base` and `out` are kernel column `kx`
+                    // of kernel row `ky` of channel `ch` (above), and the arm's
+                    // `R = n = min(16, kw - kx)` keeps `kx + R <= kw`; `dy` holds every
+                    // output position's 16 gradients.
                     unsafe {
                         match n {
                             16 => weight_grad_row::<16>(g, base, dy, out, ahead),
@@ -1463,6 +1637,15 @@ mod avx512 {
     }
 
     /// `R` consecutive kernel columns of one kernel row: `R` vectors of 16 filters.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F, and `g` must pass [`super::conv16_weight_grad`]'s checks.
+    /// `base` must point at pixel `(ch, ky, kx)` of the `[channels, rows, cols]` image for a
+    /// channel `ch < channels`, a kernel row `ky < kh` and a kernel column with
+    /// `kx + R <= kw`; `dy` must hold the `out_rows · out_cols` output gradients of 16
+    /// floats; `out` must be valid for reads and writes of the `R` weight-gradient vectors
+    /// from kernel value `(ch · kh + ky) · kw + kx` (initialised, accessed by no other
+    /// thread, overlapping neither the image nor `dy`).
     #[target_feature(enable = "avx512f")]
     unsafe fn weight_grad_row<const R: usize>(
         g: &super::Conv16,
@@ -1474,24 +1657,44 @@ mod avx512 {
         let mut acc = [_mm512_setzero_ps(); R];
         for y in 0..g.out_rows {
             ahead.issue();
+            // SAFETY: image row `ky + y · stride` with `y < out_rows`: at most
+            // `(out_rows - 1) · stride + kh - 1 < rows`, by the caller's checks.
             let row = unsafe { base.add(y * g.stride * g.cols) };
             for x in 0..g.out_cols {
+                // SAFETY: output position `y · out_cols + x < out_rows · out_cols`: its 16
+                // floats are inside `dy`.
                 let d = unsafe { _mm512_loadu_ps(dy.add((y * g.out_cols + x) * 16)) };
+                // SAFETY: image column `kx + x · stride` with `x < out_cols`: inside the
+                // row, as the bound below shows for every `r`.
                 let px = unsafe { row.add(x * g.stride) };
                 for (r, acc) in acc.iter_mut().enumerate() {
+                    // SAFETY: image column `kx + r + x · stride`, with `kx + r < kw` and
+                    // `x < out_cols`: at most `(out_cols - 1) · stride + kw - 1 < cols`.
                     let v = _mm512_set1_ps(unsafe { *px.add(r) });
                     *acc = _mm512_fmadd_ps(v, d, *acc);
                 }
             }
         }
         for (r, &sum) in acc.iter().enumerate() {
+            // SAFETY: kernel column `kx + r < kw`: its 16 floats are inside `out`.
             let at = unsafe { out.add(r * 16) };
+            // SAFETY: the 16 initialised floats at `at` (above), which only this call
+            // accesses.
             unsafe { _mm512_storeu_ps(at, _mm512_add_ps(_mm512_loadu_ps(at), sum)) };
         }
     }
 
     /// `R` consecutive output positions of one output row, at stride `S` (0: the
     /// geometry's, known at run time).
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F, and `g` must pass [`super::conv16`]'s checks. `base` must
+    /// point at pixel `(0, y · stride, x · stride)` of the `[channels, rows, cols]` image for
+    /// an output row `y < out_rows` and a first position `x` with `x + R <= out_cols`; `wt`
+    /// must hold the `channels · kh · kw` weight vectors of 16 floats; `out` must be valid
+    /// for reads and writes of the `R` output vectors from position `(y, x)` (initialised,
+    /// accessed by no other thread, overlapping neither the image nor `wt`); `S` must be 0
+    /// or `g.stride`.
     #[target_feature(enable = "avx512f")]
     unsafe fn conv16_tile<const R: usize, const S: usize>(
         g: &super::Conv16,
@@ -1505,11 +1708,20 @@ mod avx512 {
         for ch in 0..g.channels {
             for ky in 0..g.kh {
                 ahead.issue();
+                // SAFETY: channel `ch < channels`, image row `y · stride + ky` with `ky < kh`:
+                // at most `(out_rows - 1) · stride + kh - 1 < rows`, by the caller's checks.
                 let row = unsafe { base.add((ch * g.rows + ky) * g.cols) };
+                // SAFETY: kernel value `(ch · kh + ky) · kw`, the first of this kernel row's
+                // `kw` vectors, inside `wt`.
                 let w = unsafe { wt.add((ch * g.kh + ky) * g.kw * 16) };
                 for kx in 0..g.kw {
+                    // SAFETY: kernel value `(ch · kh + ky) · kw + kx` with `kx < kw`: 16
+                    // floats inside `wt`.
                     let wv = unsafe { _mm512_loadu_ps(w.add(kx * 16)) };
                     for (r, acc) in acc.iter_mut().enumerate() {
+                        // SAFETY: image column `(x + r) · stride + kx` (`stride` is
+                        // `g.stride`, as `S` is 0 or equal to it), with `x + r < out_cols`
+                        // and `kx < kw`: at most `(out_cols - 1) · stride + kw - 1 < cols`.
                         let x = _mm512_set1_ps(unsafe { *row.add(r * stride + kx) });
                         *acc = _mm512_fmadd_ps(x, wv, *acc);
                     }
@@ -1517,7 +1729,10 @@ mod avx512 {
             }
         }
         for (r, &sum) in acc.iter().enumerate() {
+            // SAFETY: output position `x + r`, `r < R`: its 16 floats are inside `out`.
             let at = unsafe { out.add(r * 16) };
+            // SAFETY: the 16 initialised floats at `at` (above), which only this call
+            // accesses.
             unsafe { _mm512_storeu_ps(at, _mm512_add_ps(_mm512_loadu_ps(at), sum)) };
         }
     }
@@ -1542,10 +1757,20 @@ mod avx512 {
 
     /// `R` rows × `V` vectors of columns: `k` rank-1 updates in registers, then added to
     /// (or stored into) `c` under the column masks.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F; `t.masks[0]` must be non-empty. For `r < R`, `p < t.k`
+    /// and the lanes `l` set in `t.masks[v]`, `v < V`: `t.a` must be valid for reads at
+    /// `r · t.lda + p · t.step`; `t.b` at `p · t.ldb + 16 v + l`; `t.c` for writes (and,
+    /// with `t.add`, reads of initialised values) at `r · t.ldc + 16 v + l`, accessed by no
+    /// other thread and overlapping neither `a` nor `b`. `t.prefetch`, `t.c_next` and
+    /// `ahead` may point anywhere (they are only prefetched).
     #[target_feature(enable = "avx512f")]
     unsafe fn tile<const R: usize, const V: usize>(t: &Tile, ahead: &mut Ahead) {
         let mut acc = [[_mm512_setzero_ps(); V]; R];
         for p in 0..t.k {
+            // SAFETY: row `p < t.k` of `t.b` starts in bounds (its first column is under
+            // the non-empty `masks[0]`).
             let bp = unsafe { t.b.add(p * t.ldb) };
             ahead.issue();
             if let Some(cn) = t.c_next
@@ -1564,9 +1789,12 @@ mod avx512 {
             // (a tail strip), so it is computed with `wrapping_add`.
             let mut bv = [_mm512_setzero_ps(); V];
             for (v, b) in bv.iter_mut().enumerate() {
+                // SAFETY: the masked load reads only the lanes under `masks[v]`, columns of
+                // row `p` of `t.b` that the caller guarantees.
                 *b = unsafe { _mm512_maskz_loadu_ps(t.masks[v], bp.wrapping_add(16 * v)) };
             }
             for (r, acc) in acc.iter_mut().enumerate() {
+                // SAFETY: element `(r, p)` of `t.a`, with `r < R`, `p < t.k`.
                 let x = _mm512_set1_ps(unsafe { *t.a.add(r * t.lda + p * t.step) });
                 for (acc, &b) in acc.iter_mut().zip(&bv) {
                     *acc = _mm512_fmadd_ps(x, b, *acc);

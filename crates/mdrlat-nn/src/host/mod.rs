@@ -244,7 +244,7 @@ impl HostLinear {
                 if let Some((dx, accumulate)) = dx {
                     // dx = dy · Wᵀ, computed as its transpose W · dyᵀ: the weight's rows
                     // are streamed once, in order (and the `gemm` crate, where it is used,
-                    // runs ~2x faster with the long dimension first).
+                    // runs faster with the long dimension first).
                     let dxt = gemm_tall(din, batch, dout, Mat::n(weight), Mat::t(dy));
                     transpose_into(&dxt, din, batch, dx, accumulate);
                 }
@@ -259,7 +259,7 @@ impl HostLinear {
 /// batch]`), a block of 16 columns of `dx` at a time: each row's 16 values are written
 /// together. Column by column, the rows of a batch lie `din` floats apart; for the fusion's
 /// and the heads' widths (8192, 4096, 2560) they fall in one or two sets of L1 and evict
-/// each other between columns: that loop had 3.8 % of the samples of an MDRLAT step.
+/// each other between columns: that loop stood out in the profile of an MDRLAT step.
 fn transpose_into(dxt: &[f32], din: usize, batch: usize, dx: &mut [f32], accumulate: bool) {
     const BLOCK: usize = 16;
     assert!(dxt.len() >= din * batch && dx.len() >= din * batch, "transpose_into: sizes");
@@ -596,9 +596,9 @@ impl HostNet {
     /// This network with forward passes that run every stage on the calling thread, none
     /// through rayon: for a policy that decides on one thread. Its streams and heads, and
     /// its products and patch cuts, would otherwise go through rayon, which, called from a
-    /// thread outside a pool, runs them on the global pool and waits for it (~0.08 ms a
-    /// decision on a Sapphire Rapids VM, up to ~0.3 when that pool sleeps; on every core
-    /// where a product is large enough to split). The results are the same.
+    /// thread outside a pool, runs them on the global pool and waits for it (a cost on
+    /// every decision, larger when that pool sleeps; on every core where a product is
+    /// large enough to split). The results are the same.
     pub fn on_calling_thread(mut self) -> Self {
         self.sequential = true;
         self
@@ -740,8 +740,8 @@ impl HostNet {
 
     /// The first depth convolution + ReLU, one image at a time, channel-last
     /// (`[B·positions, 16]`): with AVX-512 straight from the zero-padded image (16 filters in
-    /// one register; 0.10 → 0.076 ms an image), else from its patches cut into a buffer
-    /// that stays in the core's cache, `P · Wᵀ + b` by the short-by-long product.
+    /// one register), else from its patches cut into a buffer that stays in the core's
+    /// cache, `P · Wᵀ + b` by the short-by-long product.
     fn depth_conv1(&self, c1: &HostConv, images: &[&[f32]]) -> Vec<f32> {
         let g = Self::conv1_geometry(c1);
         let (positions, filters, k) = (g.positions(), c1.geometry.out_channels, g.patch_len());

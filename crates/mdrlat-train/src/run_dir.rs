@@ -1,0 +1,159 @@
+//! A run directory: where one training run keeps everything, and the one place that knows
+//! its file names.
+//!
+//! ```text
+//! run/
+//!   config.toml             every setting, resolved (RunDir::create; --steps extends it)
+//!   run.toml                the worlds, the device, the mdrlat version (RunInfo)
+//!   metrics.csv             a row every 100 steps (MetricsSink)
+//!   eval.csv                a row every evaluation: Fig. 4 and the learning curves
+//!   events.out.tfevents.*   the same scalars for TensorBoard
+//!   checkpoint/             everything a resume needs (checkpoint::save)
+//!   model.safetensors       the online network's weights at the end (RunDir::save_model)
+//! ```
+
+use crate::error::TrainError;
+use crate::learner::Learner;
+use crate::settings::Config;
+use std::path::{Path, PathBuf};
+
+/// What a run directory records about how it was started (`run.toml`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunInfo {
+    /// The training worlds as given (`mdrlat_world::load_set`'s spec).
+    pub world: String,
+    /// The compute device's command-line name (`cpu`, `wgpu`, `tch`, …).
+    pub device: String,
+    /// The mdrlat version that started the run.
+    pub mdrlat_version: String,
+}
+
+impl RunInfo {
+    /// A run of this mdrlat version in `world` on `device`.
+    pub fn new(world: impl Into<String>, device: impl Into<String>) -> Self {
+        RunInfo {
+            world: world.into(),
+            device: device.into(),
+            mdrlat_version: env!("CARGO_PKG_VERSION").to_string(),
+        }
+    }
+}
+
+/// A run's folder and its layout.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RunDir {
+    root: PathBuf,
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> TrainError + '_ {
+    move |source| TrainError::Io { path: path.to_path_buf(), source }
+}
+
+impl RunDir {
+    /// A new run in `root`, which must not exist or be empty: writes `config.toml` and
+    /// `run.toml`.
+    ///
+    /// # Errors
+    /// `root` already holds files (nothing is overwritten), or cannot be written.
+    pub fn create(root: &Path, config: &Config, info: &RunInfo) -> Result<RunDir, TrainError> {
+        if root.exists() {
+            let empty = std::fs::read_dir(root).map(|mut d| d.next().is_none()).unwrap_or(false);
+            if !empty {
+                return Err(TrainError::Checkpoint {
+                    path: root.to_path_buf(),
+                    problem: "already holds a run: choose another folder (nothing was overwritten)"
+                        .into(),
+                });
+            }
+        }
+        std::fs::create_dir_all(root).map_err(io(root))?;
+        let dir = RunDir { root: root.to_path_buf() };
+        dir.write_config(config)?;
+        let path = dir.run_info();
+        let text = toml::to_string(info).unwrap_or_else(|e| unreachable!("plain data: {e}"));
+        std::fs::write(&path, text).map_err(io(&path))?;
+        Ok(dir)
+    }
+
+    /// An existing run in `root`, with its configuration as it was started
+    /// ([`Config::load_run`]) and its `run.toml`.
+    ///
+    /// # Errors
+    /// A file is missing or unreadable, or its settings are invalid.
+    pub fn open(root: &Path) -> Result<(RunDir, Config, RunInfo), TrainError> {
+        let dir = RunDir { root: root.to_path_buf() };
+        let config = Config::load_run(&dir.config())?;
+        let path = dir.run_info();
+        let text = std::fs::read_to_string(&path).map_err(io(&path))?;
+        let info: RunInfo = toml::from_str(&text).map_err(|e| TrainError::Checkpoint {
+            path: path.clone(),
+            problem: e.to_string().trim_end().to_string(),
+        })?;
+        Ok((dir, config, info))
+    }
+
+    /// A folder that is taken to be a run directory as it stands (tests, benches).
+    pub fn at(root: &Path) -> RunDir {
+        RunDir { root: root.to_path_buf() }
+    }
+
+    /// Rewrites `config.toml` (a resumed run that is extended records its new length).
+    ///
+    /// # Errors
+    /// The file cannot be written.
+    pub fn write_config(&self, config: &Config) -> Result<(), TrainError> {
+        let path = self.config();
+        std::fs::write(&path, config.to_toml()).map_err(io(&path))
+    }
+
+    /// Writes the online network's weights (f32) to `model.safetensors`, recording the
+    /// step in its metadata.
+    ///
+    /// # Errors
+    /// The file cannot be written.
+    pub fn save_model(&self, learner: &Learner, step: u64) -> Result<(), TrainError> {
+        let path = self.model();
+        crate::export::save_safetensors_as(
+            &learner.policy_net(),
+            learner.net_config(),
+            &path,
+            crate::export::Precision::F32,
+            &[("mdrlat_step", step.to_string())],
+        )
+        .map_err(|problem| TrainError::Checkpoint { path, problem })
+    }
+
+    /// The folder.
+    pub fn path(&self) -> &Path {
+        &self.root
+    }
+    /// `config.toml`.
+    pub fn config(&self) -> PathBuf {
+        self.root.join("config.toml")
+    }
+    /// `run.toml`.
+    pub fn run_info(&self) -> PathBuf {
+        self.root.join("run.toml")
+    }
+    /// `metrics.csv`.
+    pub fn metrics(&self) -> PathBuf {
+        self.root.join("metrics.csv")
+    }
+    /// `eval.csv`.
+    pub fn evaluations(&self) -> PathBuf {
+        self.root.join("eval.csv")
+    }
+    /// `checkpoint/`.
+    pub fn checkpoint(&self) -> PathBuf {
+        self.root.join("checkpoint")
+    }
+    /// Whether a checkpoint is there to resume from.
+    pub fn has_checkpoint(&self) -> bool {
+        self.checkpoint().join("meta.json").is_file()
+    }
+    /// `model.safetensors`.
+    pub fn model(&self) -> PathBuf {
+        self.root.join("model.safetensors")
+    }
+}
