@@ -8,6 +8,8 @@
 //! - [`report`]: `episodes.csv`, `summary.csv`, `summary.md` and JSON, byte-reproducible.
 //! - [`nav`]: the navigation task's measures (time to goal, path against the shortest
 //!   collision-free path) and `navigation.csv`/`navigation.md`.
+//! - [`run`]: an evaluation as one operation — a policy in several worlds into a folder
+//!   with its tables and figures (`mdrlat eval`).
 //! - [`figures`]: paper Figs. 6/7 — six top views with their commands and the
 //!   angular-velocity trace — by replaying an episode's recorded actions.
 //!
@@ -19,6 +21,7 @@ pub mod figures;
 pub mod nav;
 pub mod protocol;
 pub mod report;
+pub mod run;
 
 pub use figures::{EpisodeFigure, Pick, draw_episode, draw_navigation, pick_episodes};
 pub use nav::{NavRecord, NavSummary, nav_records, navigation_csv, navigation_markdown};
@@ -29,6 +32,7 @@ pub use protocol::{
 pub use report::{
     Timing, WorldSummary, episodes_csv, parse_summary_csv, summary_csv, summary_markdown,
 };
+pub use run::{Agent, EvalObserver, EvalReport, Output, WorldResult, evaluate, prepare_output};
 
 /// Why an evaluation failed.
 #[derive(Debug, thiserror::Error)]
@@ -62,6 +66,9 @@ pub enum EvalError {
     /// A navigation measure cannot be taken (no goal, a goal unreachable on the grid).
     #[error("{0}")]
     Nav(String),
+    /// The output folder cannot be used or written.
+    #[error("{0}")]
+    Output(String),
     /// Replaying an episode for a figure did not reproduce it.
     #[error("replaying an episode for its figure: {0}")]
     Replay(String),

@@ -2,21 +2,19 @@
 //! scripted baseline, in any worlds, with Figs. 6/7 on request.
 
 use super::train::DeviceKind;
-use super::{PolicyArg, TaskArgs, ensure_dir, load_world};
+use super::{PolicyArg, TaskArgs, load_world};
 use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result, bail};
 use mdrlat_core::Policy;
 use mdrlat_eval::{
-    EvalSettings, NavSummary, Timing, WorldEval, WorldSummary, draw_episode, draw_navigation,
-    episodes_csv, eval_sim_config, evaluate_world, nav_records, navigation_csv,
-    navigation_markdown, pick_episodes, summary_csv, summary_markdown,
+    Agent, EvalError, EvalObserver, EvalSettings, Output, Progress, WorldResult, prepare_output,
 };
 use mdrlat_plan::MapSource;
 use mdrlat_sim::MovingRule;
 use mdrlat_sim::config::Task;
 use mdrlat_train::GreedyPolicy;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// The paper's three unseen test worlds (Fig. 5).
 const TEST_WORLDS: [&str; 3] = ["office", "furnished", "crowd"];
@@ -107,35 +105,6 @@ pub struct Args {
     overwrite: bool,
 }
 
-/// Refuses to mix or silently replace earlier results; with `overwrite`, removes the
-/// figures of the evaluation it replaces (so old pictures do not mix with new ones).
-fn check_out(dir: &Path, overwrite: bool) -> Result<()> {
-    let old = ["episodes.csv", "summary.csv", "summary.md"].iter().any(|f| dir.join(f).exists());
-    if old && !overwrite {
-        bail!(
-            "{} already holds an evaluation: choose another --out, or pass --overwrite",
-            dir.display()
-        );
-    }
-    let figures = dir.join("figures");
-    if old && figures.is_dir() {
-        std::fs::remove_dir_all(&figures)
-            .with_context(|| format!("cannot remove the old {}", figures.display()))?;
-    }
-    ensure_dir(dir)
-}
-
-/// A file-name-safe form of a world's name.
-fn file_stem(name: &str) -> String {
-    name.chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
-        .collect()
-}
-
-fn write(path: &Path, text: &str) -> Result<()> {
-    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
-}
-
 /// Runs `mdrlat eval`.
 pub fn run(a: &Args) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -199,53 +168,63 @@ pub fn run(a: &Args) -> Result<()> {
             (None, Some(PolicyArg::Planner(_))) => (None, None),
             _ => bail!("give exactly one of --checkpoint RUN_DIR and --policy NAME"),
         };
-    let planner = |world: &mdrlat_world::World| -> Result<Box<dyn Policy>> {
+    let mut planner = |world: &mdrlat_world::World| -> Result<Box<dyn Policy>, EvalError> {
         let map = match a.policy {
             Some(PolicyArg::Planner(m)) => m,
             _ => MapSource::LaserPlane,
         };
         super::planner(world, &config.sim, map)
+            .map_err(|e| EvalError::Settings(format!("planner for '{}': {e:#}", world.name)))
     };
-    check_out(&a.out, a.overwrite)?;
-
     let total = (settings.episodes_per_world() * worlds.len()) as u64;
-    let pb = progress::bar(total, "eval");
-    let mut evals: Vec<WorldEval> = Vec::new();
-    let mut summaries = Vec::new();
-    let mut navigation = Vec::new();
-    let mut names_seen = Vec::new();
-    for world in &worlds {
-        let mut per_world;
-        let policy: &mut dyn Policy = match policy.as_mut() {
-            Some(p) => p.as_mut(),
-            None => {
-                per_world =
-                    planner(world).with_context(|| format!("planner for '{}'", world.name))?;
-                per_world.as_mut()
-            }
-        };
-        let name = policy.name();
-        if !names_seen.contains(&name) {
-            names_seen.push(name.clone());
-        }
-        let base = pb.position();
-        let mut on_progress = |p: &mdrlat_eval::Progress<'_>| {
-            pb.set_position(base + p.done as u64);
-            let pct = |n: usize| 100.0 * n as f64 / p.done.max(1) as f64;
-            pb.set_message(format!(
-                "{} {:.0}% moving, {:.0}% no collision",
-                p.world,
-                pct(p.moving_successes),
-                pct(p.successes)
-            ));
-        };
-        let e = evaluate_world(world, &config.sim, policy, &settings, &mut on_progress)
-            .with_context(|| format!("evaluating {name} in '{}'", world.name))?;
-        if nav {
-            let sim = eval_sim_config(&config.sim, &settings);
-            let records = nav_records(world, &sim, &e)?;
-            let n = NavSummary::new(&name, &e.world, &records);
-            pb.suspend(|| {
+    let mut shown = Shown { pb: progress::bar(total, "eval"), json: a.json };
+    let agent = match policy.as_mut() {
+        Some(p) => Agent::One(p.as_mut()),
+        None => Agent::PerWorld(&mut planner),
+    };
+    let out = Output { dir: &a.out, overwrite: a.overwrite, figures: a.figures };
+    if let Err(e) = prepare_output(&a.out, a.overwrite) {
+        bail!("{e} (--overwrite)");
+    }
+    let report = mdrlat_eval::evaluate(
+        &worlds,
+        &config.sim,
+        &settings,
+        agent,
+        flop_per_decision,
+        &out,
+        &mut shown,
+    )?;
+    shown.pb.finish_and_clear();
+    if !a.json {
+        let (names, written) = (report.policies.join(", "), report.written.join(", "));
+        out!("{names}: wrote {written} in {}", a.out.display());
+    }
+    Ok(())
+}
+
+/// The progress bar, and each world's line as it is done.
+struct Shown {
+    pb: indicatif::ProgressBar,
+    json: bool,
+}
+
+impl EvalObserver for Shown {
+    fn progress(&mut self, before: usize, p: &Progress<'_>) {
+        self.pb.set_position((before + p.done) as u64);
+        let pct = |n: usize| 100.0 * n as f64 / p.done.max(1) as f64;
+        self.pb.set_message(format!(
+            "{} {:.0}% moving, {:.0}% no collision",
+            p.world,
+            pct(p.moving_successes),
+            pct(p.successes)
+        ));
+    }
+
+    fn world_done(&mut self, r: &WorldResult) {
+        let json = self.json;
+        self.pb.suspend(|| {
+            if let Some((n, _)) = &r.navigation {
                 out!(
                     "{:<10} reached {}/{} goals ({} collisions, {} timeouts); mean {} s, path {} m, {} x the shortest",
                     n.world,
@@ -256,15 +235,11 @@ pub fn run(a: &Args) -> Result<()> {
                     n.time_s_mean.map_or("—".into(), |x| format!("{x:.1}")),
                     n.path_m_mean.map_or("—".into(), |x| format!("{x:.2}")),
                     n.path_ratio_mean.map_or("—".into(), |x| format!("{x:.2}"))
-                )
-            });
-            navigation.push((n, records));
-        }
-        let summary = WorldSummary::new(&name, &e, &settings);
-        let timing = Timing::of(&e, flop_per_decision);
-        pb.suspend(|| {
-            if a.json {
-                out!("{}", summary.json(Some(&timing)));
+                );
+            }
+            let (summary, timing) = (&r.summary, &r.timing);
+            if json {
+                out!("{}", summary.json(Some(timing)));
             } else {
                 let rate = timing
                     .gflops()
@@ -289,52 +264,5 @@ pub fn run(a: &Args) -> Result<()> {
                 );
             }
         });
-        summaries.push(summary);
-        evals.push(e);
     }
-    pb.finish_and_clear();
-
-    write(&a.out.join("episodes.csv"), &episodes_csv(&evals, &settings.moving))?;
-    write(&a.out.join("summary.csv"), &summary_csv(&summaries))?;
-    write(&a.out.join("summary.md"), &summary_markdown(&summaries))?;
-    let mut written = vec!["episodes.csv", "summary.csv", "summary.md"];
-    if nav {
-        let rows: Vec<(&WorldEval, Vec<mdrlat_eval::NavRecord>)> =
-            evals.iter().zip(&navigation).map(|(e, (_, r))| (e, r.clone())).collect();
-        write(&a.out.join("navigation.csv"), &navigation_csv(&rows))?;
-        let sums: Vec<NavSummary> = navigation.iter().map(|(n, _)| n.clone()).collect();
-        let sim = eval_sim_config(&config.sim, &settings);
-        write(&a.out.join("navigation.md"), &navigation_markdown(&sums, settings.max_steps, &sim))?;
-        written.extend(["navigation.csv", "navigation.md"]);
-    }
-
-    let dir = a.out.join("figures");
-    if a.figures > 0 {
-        ensure_dir(&dir)?;
-        for (w, i, why) in pick_episodes(&evals, a.figures) {
-            let record = &evals[w].records[i];
-            let sim = eval_sim_config(&config.sim, &settings);
-            let fig = draw_episode(&worlds[w], &sim, record, why)?;
-            let stem =
-                format!("{}-run{}-ep{}", file_stem(&record.world), record.run, record.episode);
-            fig.strip.save_png(&dir.join(format!("{stem}.png")))?;
-            fig.trajectory.save_png(&dir.join(format!("{stem}-trajectory.png")))?;
-        }
-        if nav {
-            // Fig. 9: the first K start/goal pairs of run 0 (the same for every method
-            // evaluated with this seed), all on one map.
-            let sim = eval_sim_config(&config.sim, &settings);
-            for ((world, e), (n, _)) in worlds.iter().zip(&evals).zip(&navigation) {
-                let records: Vec<_> =
-                    e.records.iter().filter(|r| r.run == 0).take(a.figures).collect();
-                let fig = draw_navigation(world, &sim, &records, &n.eval)?;
-                fig.save_png(&dir.join(format!("{}-fig9.png", file_stem(&world.name))))?;
-            }
-        }
-        written.push("figures/");
-    }
-    if !a.json {
-        out!("{}: wrote {} in {}", names_seen.join(", "), written.join(", "), a.out.display());
-    }
-    Ok(())
 }
