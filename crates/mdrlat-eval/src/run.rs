@@ -22,12 +22,15 @@ use mdrlat_sim::config::Task;
 use mdrlat_world::World;
 use std::path::Path;
 
+/// Makes the policy for a world.
+pub type PolicyMaker<'a> = dyn FnMut(&World) -> Result<Box<dyn Policy>, EvalError> + 'a;
+
 /// Who acts in the evaluated episodes.
 pub enum Agent<'a> {
     /// One policy in every world.
     One(&'a mut dyn Policy),
     /// A policy made for each world (the planner plans on that world's map).
-    PerWorld(&'a mut dyn FnMut(&World) -> Result<Box<dyn Policy>, EvalError>),
+    PerWorld(&'a mut PolicyMaker<'a>),
 }
 
 /// Where the results go and what is drawn.
