@@ -8,7 +8,9 @@
 //!   its 128 x 160 frame — the only sim-to-real step besides `mdrlat-core`'s normalisation,
 //!   which the simulator and this node share;
 //! - [`controller`]: frame stacks, the watchdog and the safety rules, free of transport;
-//! - [`run`]: the node's loop.
+//! - [`run`]: the node's loop;
+//! - [`robot`]: the messages a turtlebot2 publishes, from plain readings (the simulator on
+//!   ROS 1, `mdrlat ros-sim`, sends its bridge's frames through it).
 //!
 //! This crate never depends on the simulator: the real robot and the simulator share only
 //! `mdrlat-core`.
@@ -17,6 +19,7 @@ pub mod controller;
 pub mod convert;
 pub mod msg;
 pub mod node;
+pub mod robot;
 pub mod run;
 pub mod xmlrpc;
 

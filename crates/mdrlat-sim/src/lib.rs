@@ -9,6 +9,7 @@
 
 pub mod avoid;
 pub mod bench;
+pub mod bridge;
 pub mod config;
 pub mod env;
 pub mod episodes;

@@ -5,11 +5,14 @@ use super::train::DeviceKind;
 use super::{ensure_parent, load_world, make_env, px_per_m, snapshot};
 use crate::config::Config;
 use anyhow::{Context, Result, bail};
-use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, LASER_BEAMS, Velocity, laser_beam_angle};
 use mdrlat_geom::Vec2;
 use mdrlat_nn::Variant;
-use mdrlat_ros::msg::{Header, Image, LaserScan, Odometry, Quaternion, Time, Twist, Vector3};
+use mdrlat_ros::msg::{Image, LaserScan, Odometry, Twist};
+use mdrlat_ros::robot;
 use mdrlat_ros::{ControllerConfig, NodeConfig, NonFinite, ScanOptions, Trigger};
+use mdrlat_sim::bridge::{
+    BridgeObserver, BridgeSettings, BridgeStep, Received, SensorFrame, Transport,
+};
 use mdrlat_sim::config::Task;
 use mdrlat_train::GreedyPolicy;
 use std::io::Write;
@@ -261,12 +264,11 @@ pub enum DepthEncoding {
     U16,
 }
 
-impl DepthEncoding {
-    /// The ROS encoding name.
-    fn name(self) -> &'static str {
-        match self {
-            DepthEncoding::F32 => "32FC1",
-            DepthEncoding::U16 => "16UC1",
+impl From<DepthEncoding> for robot::DepthEncoding {
+    fn from(e: DepthEncoding) -> Self {
+        match e {
+            DepthEncoding::F32 => robot::DepthEncoding::F32,
+            DepthEncoding::U16 => robot::DepthEncoding::U16,
         }
     }
 }
@@ -315,28 +317,16 @@ pub struct SimArgs {
     pub picture: Option<PathBuf>,
 }
 
-/// The fastest a Kobuki base drives, m/s; `ros-sim` clamps `/cmd_vel` to it.
-const KOBUKI_MAX_V: f32 = 0.7;
-/// The fastest a Kobuki base turns, rad/s.
-const KOBUKI_MAX_W: f32 = std::f32::consts::PI;
-
-/// The latest `/cmd_vel` and when it arrived.
-#[derive(Debug, Default)]
-struct LastCommand {
-    twist: Option<(Twist, Instant)>,
-    malformed: u64,
-}
-
-/// `mdrlat ros-sim`.
+/// `mdrlat ros-sim`: the simulator's bridge ([`mdrlat_sim::bridge`]) on ROS 1.
 pub fn sim(a: &SimArgs) -> Result<()> {
-    if !(a.speed.is_finite() && (0.01..=100.0).contains(&a.speed)) {
-        bail!("--speed {}: expected a factor in [0.01, 100]", a.speed);
-    }
-    if !(a.cmd_timeout_s.is_finite() && a.cmd_timeout_s > 0.0 && a.cmd_timeout_s <= 60.0) {
-        bail!("--cmd-timeout-s {}: expected seconds in (0, 60]", a.cmd_timeout_s);
-    }
-    if !(a.duration_s.is_finite() && a.duration_s >= 0.0) {
-        bail!("--duration-s {}: expected a non-negative number of seconds", a.duration_s);
+    let settings = BridgeSettings {
+        seed: a.seed,
+        cmd_timeout_s: a.cmd_timeout_s,
+        speed: a.speed,
+        duration_s: a.duration_s,
+    };
+    if let Err(e) = settings.validate() {
+        bail!("--{e}");
     }
     let mut config = Config::load_or_default(a.config.as_deref())?.sim;
     config.max_episode_steps = if a.episode_steps == 0 { u32::MAX } else { a.episode_steps };
@@ -345,226 +335,188 @@ pub fn sim(a: &SimArgs) -> Result<()> {
     for path in [&a.log, &a.picture].into_iter().flatten() {
         ensure_parent(path)?;
     }
-    let mut csv = match &a.log {
-        Some(p) => {
-            let mut f = std::io::BufWriter::new(
-                std::fs::File::create(p)
-                    .with_context(|| format!("cannot create {}", p.display()))?,
-            );
-            writeln!(f, "t_s,episode,step,x,y,yaw,v,w,cmd_v,cmd_w,d_min,reward,collision")?;
-            Some((p.clone(), f))
-        }
-        None => None,
+    let mut seen = SimLog {
+        csv: match &a.log {
+            Some(p) => {
+                let mut f = std::io::BufWriter::new(
+                    std::fs::File::create(p)
+                        .with_context(|| format!("cannot create {}", p.display()))?,
+                );
+                writeln!(f, "t_s,episode,step,x,y,yaw,v,w,cmd_v,cmd_w,d_min,reward,collision")?;
+                Some((p.clone(), f))
+            }
+            None => None,
+        },
+        picture: a.picture.is_some(),
+        best: (0, None),
+        scale: px_per_m(env.world(), 640.0),
     };
     let stop = stop_flag()?;
     let node = mdrlat_ros::Node::new(&a.name, &a.connection.master(), &a.connection.host())?;
-    let sensors = SimSensors {
-        scan: node.advertise::<LaserScan>(&a.topics.scan_topic, false)?,
-        depth: node.advertise::<Image>(&a.topics.depth_topic, false)?,
-        odom: node.advertise::<Odometry>(&a.topics.odom_topic, false)?,
-        encoding: a.depth_encoding,
-    };
     let last = Arc::new(Mutex::new(LastCommand::default()));
     {
         let last = last.clone();
         node.subscribe::<Twist>(&a.topics.cmd_topic, move |msg| {
             let mut l = last.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
             match msg {
-                Ok(t) => l.twist = Some((t, Instant::now())),
+                Ok(t) => {
+                    l.received =
+                        Some(Received { v: t.linear.x, w: t.angular.z, at: Instant::now() })
+                }
                 Err(_) => l.malformed += 1,
             }
         })?;
     }
+    let mut transport = RosRobot {
+        scan: node.advertise::<LaserScan>(&a.topics.scan_topic, false)?,
+        depth: node.advertise::<Image>(&a.topics.depth_topic, false)?,
+        odom: node.advertise::<Odometry>(&a.topics.odom_topic, false)?,
+        encoding: a.depth_encoding.into(),
+        last: last.clone(),
+        node: &node,
+        stop,
+    };
     eprintln!(
         "[mdrlat ros-sim] world {} on {}: publishing {}, {} ({}), {}; driving from {}",
         env.world().name,
         node.master(),
         a.topics.scan_topic,
         a.topics.depth_topic,
-        a.depth_encoding.name(),
+        transport.encoding.name(),
         a.topics.odom_topic,
         a.topics.cmd_topic
     );
-    let dt = env.config().dt_s;
-    let period = Duration::from_secs_f32(dt / a.speed);
-    let timeout = Duration::from_secs_f32(a.cmd_timeout_s);
-    let mut episode = 0u64;
-    env.reset_stream(a.seed, episode)?;
-    let start = Instant::now();
-    let mut seq = 0u32;
-    let mut trail: Vec<Vec2> = vec![env.pose().position()];
-    // The longest finished episode's picture (steps, image), for --picture.
-    let mut best = (0u32, None);
-    let scale = px_per_m(env.world(), 640.0);
-    let (mut steps, mut collisions, mut distance) = (0u64, 0u64, 0f64);
-    sensors.publish(&env, seq, Velocity::default());
-    let mut next = Instant::now() + period;
-    while !stop.load(Ordering::SeqCst) && !node.shutdown_requested() {
-        if a.duration_s > 0.0 && start.elapsed().as_secs_f32() >= a.duration_s {
-            break;
-        }
-        let now = Instant::now();
-        if next > now {
-            std::thread::sleep((next - now).min(Duration::from_millis(50)));
-            continue;
-        }
-        next += period;
-        let command = {
-            let l = last.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-            match l.twist {
-                // A Kobuki's own limits: 0.7 m/s, 180°/s.
-                Some((t, at)) if now.duration_since(at) <= timeout && finite(&t) => Velocity::new(
-                    (t.linear.x as f32).clamp(-KOBUKI_MAX_V, KOBUKI_MAX_V),
-                    (t.angular.z as f32).clamp(-KOBUKI_MAX_W, KOBUKI_MAX_W),
-                ),
-                _ => Velocity::default(),
-            }
-        };
-        let before = env.pose().position();
-        let step = env.step_command(command)?;
-        let (info, reward, ended) = (step.info, step.reward, step.terminated || step.truncated);
-        steps += 1;
-        seq = seq.wrapping_add(1);
-        distance += f64::from((info.pose.position() - before).length());
-        trail.push(info.pose.position());
-        if let Some((path, f)) = &mut csv {
-            writeln!(
-                f,
-                "{:.3},{episode},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{}",
-                start.elapsed().as_secs_f64(),
-                info.step,
-                info.pose.x,
-                info.pose.y,
-                info.pose.yaw,
-                info.velocity.v,
-                info.velocity.w,
-                command.v,
-                command.w,
-                info.d_min,
-                reward,
-                info.collision.map_or(String::new(), |c| format!("{c:?}"))
-            )
-            .with_context(|| format!("writing {}", path.display()))?;
-        }
-        if ended {
-            if let Some(c) = info.collision {
-                collisions += 1;
-                eprintln!(
-                    "[mdrlat ros-sim] episode {episode}: collision ({c:?}) after {} steps",
-                    info.step
-                );
-            } else {
-                eprintln!(
-                    "[mdrlat ros-sim] episode {episode}: time limit after {} steps",
-                    info.step
-                );
-            }
-            if a.picture.is_some() && info.step >= best.0 {
-                let caption = format!(
-                    "ros-sim {}: episode {episode}, {} steps{}",
-                    env.world().name,
-                    info.step,
-                    if info.collision.is_some() { ", collision" } else { "" }
-                );
-                let image = snapshot(&env, &trail, &caption, info.collision.is_some(), scale);
-                best = (info.step, Some(image));
-            }
-            trail.clear();
-            episode += 1;
-            env.reset_stream(a.seed, episode)?;
-            trail.push(env.pose().position());
-        }
-        sensors.publish(&env, seq, info.velocity);
-    }
-    if let Some((path, f)) = &mut csv {
+    let summary = mdrlat_sim::bridge::run(&mut env, &settings, &mut transport, &mut seen)?;
+    if let Some((path, f)) = &mut seen.csv {
         f.flush().with_context(|| format!("writing {}", path.display()))?;
     }
-    if let Some(p) = &a.picture {
-        let running = env.episode_steps();
-        let image = match best {
-            (steps, Some(image)) if steps >= running => image,
-            _ => {
-                let caption = format!(
-                    "ros-sim {}: episode {episode}, {running} steps (running)",
-                    env.world().name
-                );
-                snapshot(&env, &trail, &caption, false, scale)
-            }
-        };
+    if let (Some(p), Some(image)) = (&a.picture, &seen.best.1) {
         image.save_png(p)?;
     }
     let malformed = last.lock().map(|l| l.malformed).unwrap_or(0);
     out!(
-        "{{\"ros_sim\":\"{}\",\"steps\":{steps},\"episodes\":{},\"collisions\":{collisions},\"distance_m\":{distance:.3},\"malformed_cmd\":{malformed},\"seconds\":{:.2}}}",
+        "{{\"ros_sim\":\"{}\",\"steps\":{},\"episodes\":{},\"collisions\":{},\"distance_m\":{:.3},\"malformed_cmd\":{malformed},\"seconds\":{:.2}}}",
         env.world().name,
-        episode + 1,
-        start.elapsed().as_secs_f64()
+        summary.steps,
+        summary.episodes,
+        summary.collisions,
+        summary.distance_m,
+        summary.seconds
     );
     node.shutdown();
     Ok(())
 }
 
-fn finite(t: &Twist) -> bool {
-    t.linear.x.is_finite() && t.angular.z.is_finite()
+/// The latest `/cmd_vel` and how many could not be decoded.
+#[derive(Debug, Default)]
+struct LastCommand {
+    received: Option<Received>,
+    malformed: u64,
 }
 
-/// The simulator's sensor topics.
-struct SimSensors {
+/// The bridge's transport on ROS 1: the sensor topics out, `/cmd_vel` in.
+struct RosRobot<'a> {
     scan: mdrlat_ros::Publisher<LaserScan>,
     depth: mdrlat_ros::Publisher<Image>,
     odom: mdrlat_ros::Publisher<Odometry>,
-    encoding: DepthEncoding,
+    encoding: robot::DepthEncoding,
+    last: Arc<Mutex<LastCommand>>,
+    node: &'a mdrlat_ros::Node,
+    stop: Arc<AtomicBool>,
 }
 
-impl SimSensors {
-    /// Publishes the simulator's current laser, depth and odometry as a turtlebot2 with an
-    /// RPLIDAR and a Kinect would.
-    fn publish(&self, env: &mdrlat_sim::Env, seq: u32, velocity: Velocity) {
-        let stamp = Time::now();
-        let header = |frame: &str| Header { seq, stamp, frame_id: frame.to_string() };
-        let obs = env.observation();
-        let laser = env.laser().config();
-        let dt = env.config().dt_s;
-        self.scan.publish(&LaserScan {
-            header: header("laser"),
-            angle_min: laser_beam_angle(0),
-            angle_max: laser_beam_angle(LASER_BEAMS - 1),
-            angle_increment: laser_beam_angle(1) - laser_beam_angle(0),
-            time_increment: 0.0,
-            scan_time: dt,
-            range_min: 0.0,
-            range_max: laser.max_range_m,
-            ranges: obs.laser.latest().to_vec(),
-            intensities: Vec::new(),
-        });
-        let depth = obs.depth.latest();
-        let (data, step) = match self.encoding {
-            DepthEncoding::F32 => (depth.iter().flat_map(|d| d.to_le_bytes()).collect(), 4),
-            DepthEncoding::U16 => (
-                depth
-                    .iter()
-                    .flat_map(|d| ((d * 1000.0).round().clamp(0.0, 65535.0) as u16).to_le_bytes())
-                    .collect(),
-                2,
-            ),
+impl Transport for RosRobot<'_> {
+    fn latest_command(&mut self) -> Option<Received> {
+        self.last.lock().unwrap_or_else(std::sync::PoisonError::into_inner).received
+    }
+    fn publish(&mut self, f: &SensorFrame<'_>) {
+        let readings = robot::Readings {
+            ranges: f.ranges,
+            range_max_m: f.range_max_m,
+            depth: f.depth,
+            pose: [f.pose.x, f.pose.y, f.pose.yaw],
+            velocity: [f.velocity.v, f.velocity.w],
+            scan_time_s: f.dt_s,
+            seq: f.seq,
         };
-        self.depth.publish(&Image {
-            header: header("camera_depth_optical_frame"),
-            height: DEPTH_ROWS as u32,
-            width: DEPTH_COLS as u32,
-            encoding: self.encoding.name().into(),
-            is_bigendian: 0,
-            step: (DEPTH_COLS * step) as u32,
-            data,
-        });
-        let pose = env.pose();
-        self.odom.publish(&Odometry {
-            header: header("odom"),
-            child_frame_id: "base_footprint".into(),
-            position: Vector3 { x: f64::from(pose.x), y: f64::from(pose.y), z: 0.0 },
-            orientation: Quaternion::from_yaw(f64::from(pose.yaw)),
-            twist: Twist::planar(f64::from(velocity.v), f64::from(velocity.w)),
-            ..Odometry::default()
-        });
+        let (scan, depth, odom) = robot::messages(&readings, self.encoding);
+        self.scan.publish(&scan);
+        self.depth.publish(&depth);
+        self.odom.publish(&odom);
+    }
+    fn stopped(&self) -> bool {
+        self.stop.load(Ordering::SeqCst) || self.node.shutdown_requested()
+    }
+}
+
+/// The trajectory log (`--log`), the episode lines and the longest episode's picture
+/// (`--picture`).
+struct SimLog {
+    csv: Option<(PathBuf, std::io::BufWriter<std::fs::File>)>,
+    picture: bool,
+    /// The longest finished episode's steps and picture.
+    best: (u32, Option<mdrlat_render::Image>),
+    scale: f32,
+}
+
+impl BridgeObserver for SimLog {
+    fn step(&mut self, s: &BridgeStep) -> Result<(), String> {
+        let Some((path, f)) = &mut self.csv else { return Ok(()) };
+        let info = &s.info;
+        writeln!(
+            f,
+            "{:.3},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{}",
+            s.t_s,
+            s.episode,
+            info.step,
+            info.pose.x,
+            info.pose.y,
+            info.pose.yaw,
+            info.velocity.v,
+            info.velocity.w,
+            s.command.v,
+            s.command.w,
+            info.d_min,
+            s.reward,
+            info.collision.map_or(String::new(), |c| format!("{c:?}"))
+        )
+        .map_err(|e| format!("writing {}: {e}", path.display()))
+    }
+
+    fn episode_ended(&mut self, env: &mdrlat_sim::Env, trail: &[Vec2], s: &BridgeStep) {
+        let (episode, info) = (s.episode, &s.info);
+        match info.collision {
+            Some(c) => eprintln!(
+                "[mdrlat ros-sim] episode {episode}: collision ({c:?}) after {} steps",
+                info.step
+            ),
+            None => {
+                eprintln!(
+                    "[mdrlat ros-sim] episode {episode}: time limit after {} steps",
+                    info.step
+                )
+            }
+        }
+        if self.picture && info.step >= self.best.0 {
+            let caption = format!(
+                "ros-sim {}: episode {episode}, {} steps{}",
+                env.world().name,
+                info.step,
+                if info.collision.is_some() { ", collision" } else { "" }
+            );
+            let image = snapshot(env, trail, &caption, info.collision.is_some(), self.scale);
+            self.best = (info.step, Some(image));
+        }
+    }
+
+    fn stopped(&mut self, env: &mdrlat_sim::Env, trail: &[Vec2], episode: u64) {
+        let running = env.episode_steps();
+        if self.picture && (self.best.1.is_none() || running > self.best.0) {
+            let caption = format!(
+                "ros-sim {}: episode {episode}, {running} steps (running)",
+                env.world().name
+            );
+            self.best = (running, Some(snapshot(env, trail, &caption, false, self.scale)));
+        }
     }
 }
