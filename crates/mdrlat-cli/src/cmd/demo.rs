@@ -1,20 +1,24 @@
-//! `mdrlat demo`: the first thing a new user runs. A seeded episode in a built-in world,
-//! rendered to a GIF and pictures; the paper's pipeline shortened (train MDRLAT a few
-//! hundred steps, evaluate it beside the scripted baselines in an unseen world, a small
-//! table); every built-in world drawn; and the simulator benchmark.
+//! `mdrlat demo`: the first thing a new user runs. The shipped trained model (`models/
+//! mdrlat-fast`) driving a seeded episode, rendered to a GIF and pictures; the same model
+//! evaluated beside the scripted baselines in the three unseen test worlds (moving success
+//! first); the paper's pipeline shortened as a labelled check (train MDRLAT a few hundred
+//! steps, evaluate, tabulate); every built-in world drawn; and the simulator benchmark.
 
 use super::bench::{SimArgs, cpu_model, measure};
 use super::rollout::{Recorder, parse_scripted, single_env};
+use super::train::DeviceKind;
 use super::{ensure_dir, load_world, px_per_m};
 use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result};
+use mdrlat_eval::{Agent, EvalObserver, EvalSettings, Output};
 use mdrlat_nn::Variant;
 use mdrlat_render::{Scene, top_view};
 use mdrlat_sim::{EpisodeSpec, Scripted};
 use mdrlat_sweep::local::{Event, LocalOptions};
 use mdrlat_sweep::tables::{Metric, Table2};
 use mdrlat_sweep::{EvalSpec, Plan, Sweep};
+use mdrlat_train::GreedyPolicy;
 use std::path::PathBuf;
 
 /// Arguments of `mdrlat demo`.
@@ -30,9 +34,16 @@ pub struct Args {
     /// Most steps of the episode.
     #[arg(long, default_value_t = 300)]
     steps: u32,
-    /// Who drives (no trained network yet: a scripted policy).
-    #[arg(long, default_value = "wander", value_parser = parse_scripted)]
-    policy: Scripted,
+    /// A scripted policy to drive the episode instead of the shipped model (e.g. wander).
+    #[arg(long, value_parser = parse_scripted)]
+    policy: Option<Scripted>,
+    /// The trained model the demo shows and evaluates (default: the repository's
+    /// models/mdrlat-fast; "none" skips it).
+    #[arg(long, value_name = "MODEL_DIR")]
+    model: Option<PathBuf>,
+    /// Episodes per test world of the shipped model's comparison (0: skip it).
+    #[arg(long, default_value_t = 20)]
+    episodes: u32,
     /// Output directory.
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
@@ -48,6 +59,109 @@ pub struct Args {
 /// success by turning in place, the reactive wanderer, and the classical avoider that says
 /// how achievable the world is.
 const DEMO_BASELINES: [&str; 3] = ["spin", "wander", "avoid"];
+
+/// The shipped model the demo shows, relative to the repository.
+const SHIPPED_MODEL: &str = "models/mdrlat-fast";
+
+/// The model to show: `--model`, else the shipped one (from the current folder, or from
+/// the repository this binary was built in) when it is there.
+fn model_dir(a: &Args) -> Option<PathBuf> {
+    match &a.model {
+        Some(p) if p.as_os_str() == "none" => None,
+        Some(p) => Some(p.clone()),
+        None => [
+            PathBuf::from(SHIPPED_MODEL),
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..").join(SHIPPED_MODEL),
+        ]
+        .into_iter()
+        .find(|p| p.join("model.safetensors").is_file()),
+    }
+}
+
+/// The shipped model's greedy policy on all cores.
+fn load_model(dir: &std::path::Path) -> Result<GreedyPolicy> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let p = GreedyPolicy::load(dir, &DeviceKind::Cpu.device(), cores)
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("--model {}", dir.display()))?;
+    p.check_task(mdrlat_sim::config::Task::Avoid, &format!("--model {}", dir.display()))
+        .map_err(anyhow::Error::msg)?;
+    Ok(p.with_forward_batch(Some(super::bench_train::EVAL_FORWARD_BATCH)))
+}
+
+/// The shipped model beside `spin`, `wander` and `avoid` in the unseen test worlds, the
+/// same starts for all: moving success first.
+fn compare(a: &Args, model: &std::path::Path, config: &Config) -> Result<()> {
+    let worlds = ["office", "furnished", "crowd"]
+        .iter()
+        .map(|w| load_world(w))
+        .collect::<Result<Vec<_>>>()?;
+    let settings = EvalSettings { episodes: a.episodes, runs: 1, ..EvalSettings::default() };
+    out!(
+        "\nthe shipped model {} beside the scripted baselines, in the test worlds it never trained \
+         on ({} episodes each, the same starts for all; `mdrlat eval` runs the paper's 5 x 50):",
+        model.display(),
+        a.episodes
+    );
+    out!("  {:<34} {:>22} {:>22} {:>22}", "", "office", "furnished", "crowd");
+    out!(
+        "  {:<34} {:>22} {:>22} {:>22}",
+        "",
+        "moving / paper's %",
+        "moving / paper's %",
+        "moving / paper's %"
+    );
+    let names = ["model", "spin", "wander", "avoid"];
+    let total = (names.len() * worlds.len()) as u64 * u64::from(a.episodes);
+    let pb = progress::bar(total, "compare");
+    for (k, name) in names.iter().enumerate() {
+        let mut policy: Box<dyn mdrlat_core::Policy> = match *name {
+            "model" => Box::new(load_model(model)?),
+            other => parse_scripted(other).map_err(anyhow::Error::msg)?.build(&config.sim, 0),
+        };
+        let label = policy.name();
+        let dir = a.out.join("compare").join(name);
+        let out = Output { dir: &dir, overwrite: true, figures: 0 };
+        let mut shown = Bar { pb: &pb, done: (k * worlds.len()) as u64 * u64::from(a.episodes) };
+        let report = mdrlat_eval::evaluate(
+            &worlds,
+            &config.sim,
+            &settings,
+            Agent::One(policy.as_mut()),
+            None,
+            &out,
+            &mut shown,
+        )
+        .with_context(|| format!("evaluating {label}"))?;
+        let cells: Vec<String> = report
+            .worlds
+            .iter()
+            .map(|w| {
+                let s = &w.summary;
+                format!("{:>5.0} / {:>3.0}", 100.0 * s.moving_success_mean, 100.0 * s.success_mean)
+            })
+            .collect();
+        let label = if *name == "model" { format!("{} (trained)", model.display()) } else { label };
+        pb.suspend(|| {
+            out!("  {label:<34} {:>22} {:>22} {:>22}", cells[0], cells[1], cells[2]);
+        });
+    }
+    pb.finish_and_clear();
+    out!("  {}/compare/*/summary.md: each policy's table", a.out.display());
+    Ok(())
+}
+
+/// The comparison's progress bar.
+struct Bar<'a> {
+    pb: &'a indicatif::ProgressBar,
+    done: u64,
+}
+
+impl EvalObserver for Bar<'_> {
+    fn progress(&mut self, before: usize, p: &mdrlat_eval::Progress<'_>) {
+        self.pb.set_position(self.done + (before + p.done) as u64);
+    }
+}
 
 /// Trains, evaluates and tabulates through a one-variant sweep in `OUT/reproduce`.
 fn pipeline(a: &Args) -> Result<()> {
@@ -150,7 +264,15 @@ pub fn run(a: &Args) -> Result<()> {
     let world_name = world.name.clone();
     let scale = px_per_m(&world, 480.0);
     let mut venv = single_env(world, &config.sim)?;
-    let mut policy = a.policy.build(&config.sim, a.seed);
+    let model = model_dir(a);
+    let mut policy: Box<dyn mdrlat_core::Policy> = match (&a.policy, &model) {
+        (Some(s), _) => s.build(&config.sim, a.seed),
+        (None, Some(m)) => Box::new(load_model(m)?),
+        (None, None) => {
+            out!("(no trained model found at {SHIPPED_MODEL}: the scripted wanderer drives)");
+            Scripted::Wander.build(&config.sim, a.seed)
+        }
+    };
     let gif_path = a.out.join("episode.gif");
     let csv_path = a.out.join("trajectory.csv");
     let mut rec = Recorder::create(&csv_path, Some(&gif_path), scale)?;
@@ -183,7 +305,7 @@ pub fn run(a: &Args) -> Result<()> {
         "episode in '{}' (seed {}, {} policy): {} steps, reward {:.2}, ended by {}",
         world_name,
         a.seed,
-        a.policy.name(),
+        policy.name(),
         row.info.step,
         sum,
         ending
@@ -195,6 +317,10 @@ pub fn run(a: &Args) -> Result<()> {
         a.out.join("start.png").display(),
         a.out.join("end.png").display()
     );
+
+    if let (Some(m), true) = (&model, a.episodes > 0) {
+        compare(a, m, &config)?;
+    }
 
     // The paper's pipeline, shortened: train MDRLAT a few hundred steps, evaluate it and
     // the scripted baselines in the unseen `office` world (the same starts for all), and
