@@ -489,3 +489,64 @@ train_moving_success,train_success,train_path_m,unseen_moving_success,unseen_suc
     let missing = d.join("none");
     assert_clean_failure(&mdrlat(&["plot", missing.to_str().expect("utf8")]), &["eval.csv"]);
 }
+
+/// The frames of a GIF (each frame's compressed image data), read block by block: the
+/// header, the screen and its colour table, then extensions and images up to the trailer.
+fn gif_frames(bytes: &[u8]) -> Vec<Vec<u8>> {
+    assert!(bytes.starts_with(b"GIF89a") || bytes.starts_with(b"GIF87a"), "not a GIF");
+    let table = |flags: u8| if flags & 0x80 != 0 { 3usize << ((flags & 7) + 1) } else { 0 };
+    let mut at = 13 + table(bytes[10]);
+    // Data sub-blocks from `at` up to their terminator; returns their bytes and the end.
+    let sub_blocks = |mut at: usize| {
+        let mut data = Vec::new();
+        while bytes[at] != 0 {
+            let n = bytes[at] as usize;
+            data.extend_from_slice(&bytes[at + 1..at + 1 + n]);
+            at += 1 + n;
+        }
+        (data, at + 1)
+    };
+    let mut frames = Vec::new();
+    loop {
+        match bytes[at] {
+            0x21 => at = sub_blocks(at + 2).1,
+            0x2C => {
+                at += 10 + table(bytes[at + 9]);
+                let (data, end) = sub_blocks(at + 1);
+                frames.push(data);
+                at = end;
+            }
+            0x3B => return frames,
+            b => panic!("unexpected GIF block 0x{b:02x} at byte {at}"),
+        }
+    }
+}
+
+/// The demo's GIF is an episode, not a still: a frame per step plus the start, and the
+/// picture changes as the robot drives.
+#[test]
+fn the_demo_gif_shows_the_episode_frame_by_frame() {
+    let d = tmp("demo-gif");
+    let out = d.join("demo");
+    let o = mdrlat(&[
+        "demo",
+        "--out",
+        out.to_str().expect("utf8"),
+        "--model",
+        "none",
+        "--steps",
+        "12",
+        "--train-steps",
+        "0",
+        "--bench-seconds",
+        "0",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows = std::fs::read_to_string(out.join("trajectory.csv")).expect("trajectory");
+    let steps = rows.lines().count() - 1;
+    let frames = gif_frames(&std::fs::read(out.join("episode.gif")).expect("gif"));
+    assert_eq!(frames.len(), steps + 1, "the start and one frame per step");
+    assert_ne!(frames.first(), frames.last(), "the robot moved");
+    assert!(frames.windows(2).filter(|w| w[0] != w[1]).count() >= steps / 2);
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -626,5 +626,13 @@ mod tests {
     #[test]
     fn flex_is_not_libtorch() {
         assert!(!is_libtorch(&Device::flex()) && !is_libtorch_gpu(&Device::flex().autodiff()));
+        assert!(is_flex(&Device::flex()) && is_flex(&Device::flex().autodiff()));
+        // In a build with LibTorch the test can tell the two apart the other way too.
+        #[cfg(feature = "tch")]
+        #[allow(deprecated)]
+        {
+            assert!(is_libtorch(&Device::libtorch()) && !is_flex(&Device::libtorch()));
+            assert!(!is_libtorch_gpu(&Device::libtorch()));
+        }
     }
 }

@@ -300,5 +300,20 @@ mod tests {
         let a = reset(&specs, &mut Rng::seed_from_u64(3));
         let b = reset(&specs, &mut Rng::seed_from_u64(3));
         assert_eq!(a, b);
+        // The seed decides: another one puts the walkers elsewhere, and the five walkers of
+        // one reset are not all in one place (each draws its own start).
+        let c = reset(&specs, &mut Rng::seed_from_u64(4));
+        assert_ne!(a, c);
+        assert!(a.iter().any(|w| w.position != a[0].position), "{a:?}");
+        // Every start lies on its path, between two consecutive waypoints.
+        for w in a.iter().chain(&c) {
+            let on_path = specs[0].waypoints.windows(2).any(|p| {
+                let (d, e) = (p[1] - p[0], w.position - p[0]);
+                (d.x * e.y - d.y * e.x).abs() < 1e-4
+                    && e.dot(d) >= -1e-6
+                    && e.dot(d) <= d.dot(d) + 1e-6
+            });
+            assert!(on_path, "{w:?} is off its path");
+        }
     }
 }

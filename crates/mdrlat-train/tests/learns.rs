@@ -50,16 +50,13 @@ fn a_short_laser_only_run_beats_the_random_policy() {
         train(vec![world.clone()], &sim, &config, &Device::flex(), &dir, false, |_| {})
             .expect("train");
     let trained = report.evaluations.last().expect("an evaluation").mean();
-    // Where the time went: every part of the loop took some, and the parts add up to the
-    // session (less what came before the loop: set-up, the first reset).
+    // Where the time went: every part of the loop was timed, and the parts are shares of
+    // the session (what came before the loop, set-up and the first reset, is in no part).
+    // Shares only: how long anything takes is the benches' business, not a test's.
     let parts = report.timing.parts();
     assert!(parts.iter().all(|&(_, s)| s > 0.0), "{parts:?}");
     let total: f64 = parts.iter().map(|(_, s)| s).sum();
-    assert!(
-        total <= report.seconds && total > 0.8 * report.seconds,
-        "{total} of {}",
-        report.seconds
-    );
+    assert!(total <= report.seconds, "{total} of {}", report.seconds);
 
     // The random policy from the same fixed evaluation start poses.
     let mut env = Env::from_world(world, sim).expect("env");
