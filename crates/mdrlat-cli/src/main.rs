@@ -155,17 +155,6 @@ pub fn emit(args: std::fmt::Arguments) {
     }
 }
 
-/// Parses an `mdrlat` command line (without the program name) and runs it in this process:
-/// how a sweep's job runs the very commands a user would type.
-pub fn run_argv(args: &[String]) -> anyhow::Result<()> {
-    let cli =
-        Cli::try_parse_from(std::iter::once("mdrlat".to_string()).chain(args.iter().cloned()))
-            .map_err(|e| {
-                anyhow::anyhow!("mdrlat {}: {}", args.join(" "), e.to_string().trim_end())
-            })?;
-    dispatch(cli.command)
-}
-
 fn dispatch(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Demo(a) => cmd::demo::run(&a),
@@ -204,5 +193,39 @@ fn main() -> ExitCode {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every step of a sweep's jobs shows as a command line the parser accepts, for the
+    /// command the step runs: the log says what a user would type to do the same.
+    #[test]
+    fn a_sweep_step_shows_as_a_command_line_that_parses() {
+        use mdrlat_sweep::job::{Step, steps};
+        let dir = std::env::temp_dir().join(format!("mdrlat-step-argv-{}", std::process::id()));
+        for preset in ["smoke", "fast", "nav"] {
+            let sweep = mdrlat_sweep::Sweep::preset(preset).expect("a preset");
+            let plan = mdrlat_sweep::Plan::new(sweep, &dir.join(preset));
+            for job in &plan.jobs {
+                for step in steps(&plan, job, 2).expect("steps") {
+                    let argv = step.argv();
+                    let cli = Cli::try_parse_from(
+                        std::iter::once("mdrlat".to_string()).chain(argv.clone()),
+                    )
+                    .unwrap_or_else(|e| panic!("{preset} {}: {argv:?}: {e}", job.id));
+                    let same = matches!(
+                        (&step, &cli.command),
+                        (Step::Train(_) | Step::Resume(_), Command::Train(_))
+                            | (Step::Evaluate(_), Command::Eval(_))
+                            | (Step::Plot { .. }, Command::Plot(_))
+                    );
+                    assert!(same, "{argv:?}");
+                }
+            }
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

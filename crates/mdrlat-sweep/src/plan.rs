@@ -367,19 +367,28 @@ mod tests {
                 _ => 0,
             };
             assert_eq!(drawn, figures, "{id}");
-            let argv = crate::job::commands(&plan, job, 1).expect("commands").concat();
+            let argv = argv_of(&plan, job, 1);
             assert!(argv.windows(2).any(|w| w == ["--task", "nav"]), "{id}: {argv:?}");
         }
         let train = plan.job("train/mdrlat-s0").expect("train");
-        let argv = crate::job::commands(&plan, train, 1).expect("commands").concat();
+        let argv = argv_of(&plan, train, 1);
         assert!(argv.windows(2).any(|w| w == ["--task", "nav"]), "{argv:?}");
         assert!(argv.windows(2).any(|w| w == ["--world", "nav-train"]), "{argv:?}");
         // Obstacle avoidance: no --task, and baselines draw nothing.
         let paper = Plan::new(Sweep::preset("paper").expect("paper"), &dir);
         let wander = paper.job("eval/wander").expect("wander");
         assert_eq!(wander.kind, JobKind::EvalBaseline { policy: "wander".into(), figures: 0 });
-        let argv = crate::job::commands(&paper, wander, 1).expect("commands").concat();
+        let argv = argv_of(&paper, wander, 1);
         assert!(!argv.contains(&"--task".to_string()), "{argv:?}");
+    }
+
+    /// A job's steps as the command lines they show as, joined.
+    fn argv_of(plan: &Plan, job: &Job, threads: usize) -> Vec<String> {
+        crate::job::steps(plan, job, threads)
+            .expect("steps")
+            .iter()
+            .flat_map(|s| s.argv())
+            .collect()
     }
 
     #[test]

@@ -105,6 +105,45 @@ pub struct Args {
     overwrite: bool,
 }
 
+impl Args {
+    /// A sweep's evaluation step, as `mdrlat eval` would take it from its command line.
+    ///
+    /// # Errors
+    /// A baseline this build does not know.
+    pub fn from_step(e: &mdrlat_sweep::job::EvalStep) -> Result<Self> {
+        use mdrlat_sweep::job::Who;
+        let (checkpoint, policy) = match &e.who {
+            Who::Run(run) => (Some(run.clone()), None),
+            Who::Baseline(name) => {
+                (None, Some(super::parse_policy(name).map_err(anyhow::Error::msg)?))
+            }
+        };
+        Ok(Args {
+            checkpoint,
+            policy,
+            worlds: e.worlds.clone(),
+            task: TaskArgs { task: Some(e.task), start: None, goal: None },
+            episodes: e.episodes,
+            runs: e.runs,
+            max_steps: e.max_steps,
+            seed: e.seed,
+            min_path: e.min_path_m,
+            min_reach: e.min_reach_m,
+            out: e.out.clone(),
+            json: false,
+            figures: e.figures as usize,
+            envs: 0,
+            forward_batch: super::bench_train::EVAL_FORWARD_BATCH,
+            threads: Some(e.threads),
+            bf16: false,
+            sim_threads: 0,
+            device: DeviceKind::Cpu,
+            config: None,
+            overwrite: true,
+        })
+    }
+}
+
 /// Runs `mdrlat eval`.
 pub fn run(a: &Args) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());

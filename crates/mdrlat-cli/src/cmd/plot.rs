@@ -44,6 +44,19 @@ pub struct Args {
     by_variant: bool,
 }
 
+impl Args {
+    /// Fig. 4 of a sweep: the runs averaged per variant into `out`.
+    pub fn by_variant(out: &std::path::Path, runs: &[std::path::PathBuf]) -> Self {
+        Args {
+            runs: runs.to_vec(),
+            out: out.to_path_buf(),
+            smooth: 0.6,
+            metric: Metric::Eval,
+            by_variant: true,
+        }
+    }
+}
+
 /// The runs' curves averaged per label's variant: mean over runs at each common step, band
 /// ± population std over runs (a single run keeps its own band).
 fn average_by_variant(series: Vec<(String, Series)>) -> Vec<Series> {

@@ -7,6 +7,7 @@ use super::train::DeviceKind;
 use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result, bail};
+use mdrlat_sweep::job::Step;
 use mdrlat_sweep::local::{Event, LocalOptions};
 use mdrlat_sweep::slurm::SlurmOptions;
 use mdrlat_sweep::{JobKind, JobState, Plan, Sweep};
@@ -279,6 +280,16 @@ fn run_slurm(plan: &Plan, exe: &std::path::Path, a: &Args) -> Result<()> {
     report_outcome(plan, result)
 }
 
+/// Runs one step of a job by calling what the `mdrlat` command it shows as calls.
+fn run_step(step: &Step) -> Result<()> {
+    match step {
+        Step::Train(t) => super::train::run(&super::train::Args::from_step(t)?),
+        Step::Resume(dir) => super::train::run(&super::train::Args::resume(dir)),
+        Step::Evaluate(e) => super::eval::run(&super::eval::Args::from_step(e)?),
+        Step::Plot { out, runs } => super::plot::run(&super::plot::Args::by_variant(out, runs)),
+    }
+}
+
 /// Runs one job in this process: waits for its lock, skips it if finished, runs its
 /// `mdrlat` command lines, then marks it done (or failed, with the reason).
 fn run_job(dir: &std::path::Path, id: &str, threads: usize) -> Result<()> {
@@ -291,9 +302,9 @@ fn run_job(dir: &std::path::Path, id: &str, threads: usize) -> Result<()> {
     }
     let result = (|| -> Result<()> {
         plan.check_needs(&job)?;
-        for argv in mdrlat_sweep::job::commands(&plan, &job, threads)? {
-            out!("{id}: mdrlat {}", argv.join(" "));
-            crate::run_argv(&argv)?;
+        for step in mdrlat_sweep::job::steps(&plan, &job, threads)? {
+            out!("{id}: mdrlat {}", step.argv().join(" "));
+            run_step(&step)?;
         }
         if job.kind == JobKind::Tables {
             let table = mdrlat_sweep::tables::write(&plan)?;

@@ -98,6 +98,51 @@ pub struct Args {
     device: Option<DeviceKind>,
 }
 
+impl Args {
+    /// A sweep's training step, as `mdrlat train` would take it from [`Step::argv`]'s
+    /// command line.
+    ///
+    /// # Errors
+    /// A preset or device this build does not know.
+    ///
+    /// [`Step::argv`]: mdrlat_sweep::job::Step::argv
+    pub fn from_step(t: &mdrlat_sweep::job::TrainStep) -> Result<Self> {
+        use clap::ValueEnum;
+        let device = DeviceKind::from_str(&t.device, true)
+            .map_err(|_| anyhow::anyhow!("device '{}' is not available in this build", t.device))?;
+        Ok(Args {
+            variant: Some(t.variant),
+            world: Some(t.world.clone()),
+            preset: t.preset.parse().map_err(anyhow::Error::msg)?,
+            task: TaskArgs { task: Some(t.task), start: None, goal: None },
+            steps: Some(t.steps),
+            seed: Some(t.seed),
+            out: Some(t.out.clone()),
+            resume: None,
+            config: None,
+            sets: t.sets.clone(),
+            device: Some(device),
+        })
+    }
+
+    /// Continues the run in `dir` (`mdrlat train --resume DIR`).
+    pub fn resume(dir: &std::path::Path) -> Self {
+        Args {
+            variant: None,
+            world: None,
+            preset: Preset::Paper,
+            task: TaskArgs { task: None, start: None, goal: None },
+            steps: None,
+            seed: None,
+            out: None,
+            resume: Some(dir.to_path_buf()),
+            config: None,
+            sets: Vec::new(),
+            device: None,
+        }
+    }
+}
+
 /// Runs `mdrlat train`.
 pub fn run(a: &Args) -> Result<()> {
     let (root, opened, config, info) = match &a.resume {
