@@ -1,4 +1,5 @@
-"""The PyTorch networks give the Rust networks' Q-values (skipped without torch)."""
+"""The PyTorch networks give the Rust networks' Q-values (skipped without torch, unless
+MDRLAT_REQUIRE_TORCH=1 says torch must be there, as in CI)."""
 
 import os
 from pathlib import Path
@@ -6,7 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-torch = pytest.importorskip("torch")
+if os.environ.get("MDRLAT_REQUIRE_TORCH") == "1":
+    import torch  # a missing torch fails the run instead of skipping it
+else:
+    torch = pytest.importorskip("torch")
 from mdrlat.qnet import QNet, read_safetensors  # noqa: E402
 
 REFERENCES = os.environ.get("MDRLAT_QNET_REFERENCES")
@@ -17,6 +21,11 @@ def cases():
     if not REFERENCES or not Path(REFERENCES).is_dir():
         return []
     return sorted(p for p in Path(REFERENCES).iterdir() if (p / "q.npy").is_file())
+
+
+def test_the_reference_networks_are_there_when_torch_is_required():
+    if os.environ.get("MDRLAT_REQUIRE_TORCH") == "1":
+        assert cases(), f"MDRLAT_REQUIRE_TORCH=1 but no reference networks in {REFERENCES!r}"
 
 
 @pytest.mark.skipif(not cases(), reason="no reference networks (run through cargo test -p mdrlat-py)")

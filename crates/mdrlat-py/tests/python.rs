@@ -2,7 +2,9 @@
 //! and installs the package with `pip install ./python` into a virtual environment under
 //! `target/python/` (kept between runs, so later runs only rebuild what changed), then runs
 //! pytest. Without a Python ≥ 3.10 with `venv`, or without PyPI, it says why and skips —
-//! unless `MDRLAT_REQUIRE_PYTHON=1` (CI), where that is a failure.
+//! unless `MDRLAT_REQUIRE_PYTHON=1` (CI), where that is a failure. `MDRLAT_PYTHON` picks the
+//! interpreter (CI: Debian's, whose `python3-torch` the venv sees); with
+//! `MDRLAT_REQUIRE_TORCH=1` the PyTorch parity test fails instead of skipping without torch.
 //!
 //! It first writes reference networks for the PyTorch module's test: every variant (and a
 //! navigation MDRLAT) freshly initialised from a seed, as `model.safetensors`, with inputs
@@ -116,7 +118,12 @@ fn the_python_package_builds_installs_and_passes_its_tests() {
             .args(["-c", "import sys; assert sys.version_info >= (3, 10), sys.version"]))?;
         if !bin.join("python").exists() {
             std::fs::create_dir_all(&base).map_err(|e| format!("{}: {e}", base.display()))?;
-            run(Command::new(&python).arg("-m").arg("venv").arg(&venv))?;
+            // The interpreter's own packages stay visible: where the only CPU build of
+            // PyTorch at hand is the system's (Debian's python3-torch in CI, PyPI's wheels
+            // bring CUDA), the parity test finds it there.
+            run(Command::new(&python)
+                .args(["-m", "venv", "--system-site-packages"])
+                .arg(&venv))?;
         }
         run(Command::new(bin.join("python")).args([
             "-m",
