@@ -55,6 +55,16 @@ impl Action {
         self.0 as usize
     }
 
+    /// The Table 1 action nearest a velocity (each component scaled by its largest value
+    /// in the table; the first on ties).
+    pub fn nearest(cmd: Velocity) -> Self {
+        let v_max = TABLE_1.iter().map(|a| a.v).fold(f32::MIN_POSITIVE, f32::max);
+        let w_max = TABLE_1.iter().map(|a| a.w.abs()).fold(f32::MIN_POSITIVE, f32::max);
+        let d = |a: &Velocity| ((a.v - cmd.v) / v_max).powi(2) + ((a.w - cmd.w) / w_max).powi(2);
+        let best = (0..Self::COUNT).min_by(|&i, &j| d(&TABLE_1[i]).total_cmp(&d(&TABLE_1[j])));
+        Self(best.unwrap_or(0) as u8)
+    }
+
     /// The velocity command of this action (Table 1).
     pub const fn command(self) -> Velocity {
         TABLE_1[self.0 as usize]
@@ -95,6 +105,15 @@ impl fmt::Display for Action {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_nearest_action_of_a_table_1_velocity_is_itself() {
+        for (i, v) in TABLE_1.iter().enumerate() {
+            assert_eq!(Action::nearest(*v).index(), i);
+        }
+        assert_eq!(Action::nearest(Velocity::new(0.45, 0.02)).index(), 1);
+        assert_eq!(Action::nearest(Velocity::new(0.0, -3.0)).command().v, 0.0, "a turn in place");
+    }
 
     #[test]
     fn table_1_matches_the_paper() {

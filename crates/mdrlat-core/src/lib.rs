@@ -19,7 +19,8 @@ pub use obs::{
     normalize_goal, normalize_laser,
 };
 pub use policy::{
-    Policy, PolicyError, Sensors, act_each, catch_panic, check_batch, greedy_actions,
+    Decision, Policy, PolicyError, Sensors, catch_panic, check_batch, decide_each, decide_one,
+    greedy_actions,
 };
 pub use rng::Rng;
 

@@ -1,4 +1,6 @@
-//! The one policy interface: a batch of observations in, one action per observation out.
+//! The one policy interface: a batch of observations in, one [`Decision`] (an action of
+//! Table 1 and the velocity command the robot executes) per observation out. A single
+//! decision is the batch of one ([`decide_one`]).
 //!
 //! Everything that drives the robot implements [`Policy`]: the scripted baselines of the
 //! simulator, a trained Q-network (batched: one forward for every environment of a
@@ -64,7 +66,32 @@ impl fmt::Display for PolicyError {
 
 impl std::error::Error for PolicyError {}
 
-/// Anything that picks actions from observations.
+/// One decision: the Table 1 action and the velocity command the robot executes. For the
+/// discrete policies (every network, the scripted baselines) the command is the action's
+/// Table 1 velocity; a continuous controller (the classical planner) gives its own command
+/// and the nearest Table 1 action, for the records.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decision {
+    /// The action (a record's `action` column; what a network learns from).
+    pub action: Action,
+    /// The velocity command the robot executes.
+    pub command: Velocity,
+}
+
+impl From<Action> for Decision {
+    fn from(action: Action) -> Self {
+        Decision { action, command: action.command() }
+    }
+}
+
+impl Decision {
+    /// A continuous controller's command, recorded as the nearest Table 1 action.
+    pub fn continuous(command: Velocity) -> Self {
+        Decision { action: Action::nearest(command), command }
+    }
+}
+
+/// Anything that decides from observations.
 ///
 /// A caller stepping several environments at once gives each its *slot* (0, 1, …) and
 /// passes the observations of the slots that are running, in any subset and order, with
@@ -84,38 +111,34 @@ pub trait Policy: Send {
         let _ = (slot, seed);
     }
 
-    /// One action per observation of `batch` (oldest frame first, metres, as
+    /// One decision per observation of `batch` (oldest frame first, metres, as
     /// [`Observation`] holds them) into `out`, which is cleared first; `slots[i]` is the
-    /// slot of `batch[i]`.
+    /// slot of `batch[i]`. The episode runner drives the robot with the decisions' commands.
     ///
     /// # Errors
     /// The policy cannot decide (see [`PolicyError`]); the caller must not guess an action.
-    fn act(
+    fn decide(
         &mut self,
         batch: &[&Observation],
         slots: &[usize],
-        out: &mut Vec<Action>,
+        out: &mut Vec<Decision>,
     ) -> Result<(), PolicyError>;
+}
 
-    /// The velocity command of each observation of `batch` into `commands` (cleared first),
-    /// with [`Policy::act`]'s actions in `actions`: by default each action's Table 1
-    /// velocity. A continuous controller (the classical planner) overrides it with its own
-    /// velocities, and its actions are then the nearest Table 1 ones, for the records. The
-    /// episode runner drives the robot with these commands.
-    ///
-    /// # Errors
-    /// As [`Policy::act`].
-    fn commands(
-        &mut self,
-        batch: &[&Observation],
-        slots: &[usize],
-        actions: &mut Vec<Action>,
-        commands: &mut Vec<Velocity>,
-    ) -> Result<(), PolicyError> {
-        self.act(batch, slots, actions)?;
-        commands.clear();
-        commands.extend(actions.iter().map(|a| a.command()));
-        Ok(())
+/// One decision for one observation in slot `slot`: the batch of one.
+///
+/// # Errors
+/// The policy's, or [`PolicyError::Count`] if it decided other than once.
+pub fn decide_one(
+    policy: &mut dyn Policy,
+    obs: &Observation,
+    slot: usize,
+) -> Result<Decision, PolicyError> {
+    let mut out = Vec::with_capacity(1);
+    policy.decide(&[obs], &[slot], &mut out)?;
+    match out.as_slice() {
+        [d] => Ok(*d),
+        _ => Err(PolicyError::Count { expected: 1, got: out.len() }),
     }
 }
 
@@ -139,16 +162,18 @@ pub fn check_batch(batch: &[&Observation], slots: &[usize]) -> Result<(), Policy
 /// `decide(slot, observation)` for each, in order.
 ///
 /// # Errors
-/// [`check_batch`]'s.
-pub fn act_each(
+/// [`check_batch`]'s, or the first error of `decide`.
+pub fn decide_each<D: Into<Decision>>(
     batch: &[&Observation],
     slots: &[usize],
-    out: &mut Vec<Action>,
-    mut decide: impl FnMut(usize, &Observation) -> Action,
+    out: &mut Vec<Decision>,
+    mut decide: impl FnMut(usize, &Observation) -> Result<D, PolicyError>,
 ) -> Result<(), PolicyError> {
     check_batch(batch, slots)?;
     out.clear();
-    out.extend(batch.iter().zip(slots).map(|(obs, &slot)| decide(slot, obs)));
+    for (obs, &slot) in batch.iter().zip(slots) {
+        out.push(decide(slot, obs)?.into());
+    }
     Ok(())
 }
 

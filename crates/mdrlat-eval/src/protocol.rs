@@ -9,7 +9,7 @@
 //! environments the evaluation has.
 
 use crate::EvalError;
-use mdrlat_core::{Action, Observation, Policy, PolicyError, Rng, Sensors, Velocity};
+use mdrlat_core::{Action, Decision, Observation, Policy, PolicyError, Rng, Sensors, Velocity};
 use mdrlat_geom::Pose2;
 use mdrlat_sim::{
     Collision, EpisodeOutcome, EpisodeSpec, MovingRule, Observer, RunOptions, SimConfig,
@@ -221,22 +221,13 @@ impl Policy for Timed<'_> {
     fn begin_episode(&mut self, slot: usize, seed: Option<u64>) {
         self.inner.begin_episode(slot, seed);
     }
-    fn act(
+    fn decide(
         &mut self,
         batch: &[&Observation],
         slots: &[usize],
-        out: &mut Vec<Action>,
+        out: &mut Vec<Decision>,
     ) -> Result<(), PolicyError> {
-        self.timed(batch.len(), |inner| inner.act(batch, slots, out))
-    }
-    fn commands(
-        &mut self,
-        batch: &[&Observation],
-        slots: &[usize],
-        actions: &mut Vec<Action>,
-        commands: &mut Vec<Velocity>,
-    ) -> Result<(), PolicyError> {
-        self.timed(batch.len(), |inner| inner.commands(batch, slots, actions, commands))
+        self.timed(batch.len(), |inner| inner.decide(batch, slots, out))
     }
 }
 

@@ -177,13 +177,15 @@ impl Policy for Diverged {
     fn sensors(&self) -> Sensors {
         Sensors::BOTH
     }
-    fn act(
+    fn decide(
         &mut self,
         batch: &[&Observation],
         _slots: &[usize],
-        out: &mut Vec<Action>,
+        out: &mut Vec<mdrlat_core::Decision>,
     ) -> Result<(), PolicyError> {
-        mdrlat_core::greedy_actions(&vec![f32::NAN; 10 * batch.len()], batch.len(), out)
+        out.clear();
+        let mut actions = Vec::new();
+        mdrlat_core::greedy_actions(&vec![f32::NAN; 10 * batch.len()], batch.len(), &mut actions)
     }
 }
 

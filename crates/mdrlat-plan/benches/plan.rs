@@ -50,13 +50,13 @@ fn decisions(c: &mut Criterion) {
         PlannerPolicy::new(&world, &config, &PlannerOptions::default()).expect("planner");
     let mut env = Env::from_world(world, config).expect("env");
     env.reset(Some(1)).expect("reset");
-    let (mut actions, mut commands) = (Vec::new(), Vec::new());
+    let mut decisions = Vec::new();
     let obs = env.observation().clone();
-    planner.commands(&[&obs], &[0], &mut actions, &mut commands).expect("plan");
+    planner.decide(&[&obs], &[0], &mut decisions).expect("plan");
     g.bench_function("planner (DWA on one scan)", |bench| {
         bench.iter(|| {
-            planner.commands(&[&obs], &[0], &mut actions, &mut commands).expect("decide");
-            black_box(commands[0])
+            planner.decide(&[&obs], &[0], &mut decisions).expect("decide");
+            black_box(decisions[0].command)
         })
     });
     let ahead = mdrlat_core::Action::new(5).expect("action");

@@ -4,7 +4,7 @@
 use crate::astar::{PlanError, astar};
 use crate::dwa::{Dwa, DwaConfig, Limits};
 use crate::grid::{CostMap, MapKind, OccupancyGrid};
-use mdrlat_core::{Action, Observation, Policy, PolicyError, Sensors, TABLE_1, Velocity};
+use mdrlat_core::{Decision, Observation, Policy, PolicyError, Sensors, Velocity};
 use mdrlat_geom::{Pose2, Vec2};
 use mdrlat_sim::SimConfig;
 use mdrlat_sim::sensors::Laser;
@@ -77,7 +77,7 @@ struct Slot {
 
 /// The classical baseline (the paper's move_base): see the crate docs. It reads the
 /// robot's pose and goal from the observation ([`Observation::pose`], [`Observation::goal`])
-/// and the latest laser scan; it drives with continuous velocities ([`Policy::commands`]);
+/// and the latest laser scan; it drives with continuous velocities (a [`Decision::continuous`](mdrlat_core::Decision::continuous) per observation);
 /// its actions are the nearest Table 1 ones, for the records.
 #[derive(Debug, Clone)]
 pub struct PlannerPolicy {
@@ -198,15 +198,6 @@ fn distance_to_points(p: Vec2, points: &[Vec2]) -> f32 {
     points.iter().map(|&q| (q - p).length_sq()).fold(f32::INFINITY, f32::min).sqrt()
 }
 
-/// The Table 1 action nearest a velocity (each component scaled by its largest value).
-fn nearest_action(cmd: Velocity) -> Action {
-    let v_max = TABLE_1.iter().map(|a| a.v).fold(f32::MIN_POSITIVE, f32::max);
-    let w_max = TABLE_1.iter().map(|a| a.w.abs()).fold(f32::MIN_POSITIVE, f32::max);
-    let d = |a: &Velocity| ((a.v - cmd.v) / v_max).powi(2) + ((a.w - cmd.w) / w_max).powi(2);
-    let best = (0..TABLE_1.len()).min_by(|&i, &j| d(&TABLE_1[i]).total_cmp(&d(&TABLE_1[j])));
-    Action::new(best.unwrap_or(0)).unwrap_or_else(|| unreachable!("an index of TABLE_1"))
-}
-
 impl Policy for PlannerPolicy {
     fn name(&self) -> String {
         self.label.clone()
@@ -222,44 +213,14 @@ impl Policy for PlannerPolicy {
         }
     }
 
-    fn act(
+    fn decide(
         &mut self,
         batch: &[&Observation],
         slots: &[usize],
-        out: &mut Vec<Action>,
+        out: &mut Vec<Decision>,
     ) -> Result<(), PolicyError> {
-        let mut commands = Vec::new();
-        self.commands(batch, slots, out, &mut commands)
-    }
-
-    fn commands(
-        &mut self,
-        batch: &[&Observation],
-        slots: &[usize],
-        actions: &mut Vec<Action>,
-        commands: &mut Vec<Velocity>,
-    ) -> Result<(), PolicyError> {
-        mdrlat_core::check_batch(batch, slots)?;
-        commands.clear();
-        actions.clear();
-        for (obs, &slot) in batch.iter().zip(slots) {
-            let cmd = self.command(obs, slot)?;
-            commands.push(cmd);
-            actions.push(nearest_action(cmd));
-        }
-        Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_nearest_action_of_a_table_1_velocity_is_itself() {
-        for (i, v) in TABLE_1.iter().enumerate() {
-            assert_eq!(nearest_action(*v).index(), i);
-        }
-        assert_eq!(nearest_action(Velocity::new(0.45, 0.02)).index(), 1);
+        mdrlat_core::decide_each(batch, slots, out, |slot, obs| {
+            self.command(obs, slot).map(Decision::continuous)
+        })
     }
 }

@@ -254,7 +254,7 @@ impl Env {
 /// plain stores also leave the frames for the caller to read): `VectorEnv` 4096-step
 /// loops on an AMD EPYC Zen 4 VM 83.5–88.4 → 80.0–81.9 µs a step, `speed.py` 0.81 →
 /// 0.83–0.84 of `bench sim`; on a Sapphire Rapids Xeon plain stores were the faster at
-/// every size from 8 to 32 frames (`docs/python-speed.md`).
+/// every size from 8 to 32 frames (`docs/performance.md`, *Python vector-env speed*).
 const WINDOW_FRAMES: usize = 16;
 
 /// The most environments (and threads) a vector env takes.

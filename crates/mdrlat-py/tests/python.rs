@@ -121,9 +121,7 @@ fn the_python_package_builds_installs_and_passes_its_tests() {
             // The interpreter's own packages stay visible: where the only CPU build of
             // PyTorch at hand is the system's (Debian's python3-torch in CI, PyPI's wheels
             // bring CUDA), the parity test finds it there.
-            run(Command::new(&python)
-                .args(["-m", "venv", "--system-site-packages"])
-                .arg(&venv))?;
+            run(Command::new(&python).args(["-m", "venv", "--system-site-packages"]).arg(&venv))?;
         }
         run(Command::new(bin.join("python")).args([
             "-m",

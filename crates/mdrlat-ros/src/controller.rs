@@ -111,7 +111,6 @@ pub struct Controller {
     stacked: usize,
     stops: Vec<Stop>,
     inference_error: Option<String>,
-    actions: Vec<Action>,
     scratch_scan: [f32; LASER_BEAMS],
     /// A scan has been read successfully.
     scans_ok: bool,
@@ -139,7 +138,6 @@ impl Controller {
             stacked: 0,
             stops: Vec::new(),
             inference_error: None,
-            actions: Vec::with_capacity(1),
             scratch_scan: [0.0; LASER_BEAMS],
             scans_ok: false,
             fatal: None,
@@ -333,14 +331,10 @@ impl Controller {
             self.obs.odom[ODOM_HISTORY - 1] = self.odom_velocity;
             self.stacked += 1;
             let started = Instant::now();
-            let (obs, actions) = (&self.obs, &mut self.actions);
+            let obs = &self.obs;
             // A panicking backend is an inference error, not a dead node.
             let decided = mdrlat_core::catch_panic("the policy", || {
-                policy.act(&[obs], &[0], actions)?;
-                actions
-                    .first()
-                    .copied()
-                    .ok_or(mdrlat_core::PolicyError::Count { expected: 1, got: 0 })
+                mdrlat_core::decide_one(policy, obs, 0).map(|d| d.action)
             })
             .map_err(|e| e.to_string());
             match decided {
@@ -412,11 +406,11 @@ mod tests {
         fn sensors(&self) -> mdrlat_core::Sensors {
             mdrlat_core::Sensors::BOTH
         }
-        fn act(
+        fn decide(
             &mut self,
             batch: &[&Observation],
             _slots: &[usize],
-            out: &mut Vec<Action>,
+            out: &mut Vec<mdrlat_core::Decision>,
         ) -> Result<(), mdrlat_core::PolicyError> {
             // What a network gets: the stacks through the one normalisation.
             let obs = batch[0];
@@ -430,7 +424,7 @@ mod tests {
             if self.fail {
                 Err(mdrlat_core::PolicyError::Backend("backend lost".into()))
             } else {
-                out.push(Action::new(self.action).expect("an action of Table 1"));
+                out.push(Action::new(self.action).expect("an action of Table 1").into());
                 Ok(())
             }
         }

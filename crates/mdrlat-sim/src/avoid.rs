@@ -36,7 +36,9 @@ use crate::config::SimConfig;
 use crate::env::Observation;
 use crate::robot::RobotState;
 use crate::sensors::{DepthCamera, DepthGeometry, Laser};
-use mdrlat_core::{Action, ODOM_HISTORY, Policy, PolicyError, Sensors, Velocity, act_each};
+use mdrlat_core::{
+    Action, Decision, ODOM_HISTORY, Policy, PolicyError, Sensors, Velocity, decide_each,
+};
 use mdrlat_geom::{Pose2, Vec2};
 use std::collections::BTreeMap;
 
@@ -238,7 +240,7 @@ impl AvoidPolicy {
     }
 
     /// The action for one observation of slot `slot`.
-    fn decide(&mut self, slot: usize, obs: &Observation) -> Action {
+    fn decide_slot(&mut self, slot: usize, obs: &Observation) -> Action {
         self.depth_ranges.resize(self.depth.column_angles.len(), f32::INFINITY);
         let mut depth_ranges = std::mem::take(&mut self.depth_ranges);
         self.depth.obstacle_ranges(obs.depth.latest(), 0.03, self.body_height_m, &mut depth_ranges);
@@ -539,13 +541,13 @@ impl Policy for AvoidPolicy {
     fn begin_episode(&mut self, slot: usize, _seed: Option<u64>) {
         *self.slot(slot) = Slot::default();
     }
-    fn act(
+    fn decide(
         &mut self,
         batch: &[&Observation],
         slots: &[usize],
-        out: &mut Vec<Action>,
+        out: &mut Vec<Decision>,
     ) -> Result<(), PolicyError> {
-        act_each(batch, slots, out, |slot, obs| self.decide(slot, obs))
+        decide_each(batch, slots, out, |slot, obs| Ok(self.decide_slot(slot, obs)))
     }
 }
 

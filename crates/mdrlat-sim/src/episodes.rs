@@ -14,7 +14,7 @@
 use crate::env::{Collision, Env, Observation, SimError};
 use crate::rollout::TrajectoryRow;
 use crate::vec_env::VecEnv;
-use mdrlat_core::{Action, Policy, PolicyError, Velocity};
+use mdrlat_core::{Action, Decision, Policy, PolicyError, Velocity};
 use mdrlat_geom::{Pose2, Vec2};
 
 /// One episode to run.
@@ -286,7 +286,7 @@ fn run(
         *r = start(venv, policy, observer, &mut done, slot, &mut next)?;
     }
 
-    let (mut active, mut actions, mut commands) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut active, mut decisions) = (Vec::new(), Vec::new());
     let mut masked = vec![None; slots];
     loop {
         active.clear();
@@ -296,24 +296,24 @@ fn run(
         }
         let decided = venv.with_observations(|obs| {
             let batch: Vec<&Observation> = active.iter().map(|&i| obs[i]).collect();
-            policy.commands(&batch, &active, &mut actions, &mut commands)
+            policy.decide(&batch, &active, &mut decisions)
         });
         let first_episode = running[active[0]].as_ref().map_or(0, |r| r.episode);
         let policy_error =
             |source| RunError::Policy { policy: policy.name(), episode: first_episode, source };
         decided.map_err(policy_error)?;
-        if actions.len() != active.len() || commands.len() != active.len() {
+        if decisions.len() != active.len() {
             return Err(policy_error(PolicyError::Count {
                 expected: active.len(),
-                got: actions.len().min(commands.len()),
+                got: decisions.len(),
             }));
         }
         masked.iter_mut().for_each(|m| *m = None);
-        for (&slot, &c) in active.iter().zip(&commands) {
-            masked[slot] = Some(c);
+        for (&slot, d) in active.iter().zip(&decisions) {
+            masked[slot] = Some(d.command);
         }
         let stepped = venv.step_masked_commands(&masked)?.to_vec();
-        for ((&slot, &action), &command) in active.iter().zip(&actions).zip(&commands) {
+        for (&slot, &Decision { action, command }) in active.iter().zip(&decisions) {
             let Some(s) = stepped[slot] else { continue };
             let Some(r) = running[slot].as_mut() else { continue };
             r.path_m += f64::from((s.info.pose.position() - r.last.position()).length());

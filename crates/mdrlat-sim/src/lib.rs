@@ -29,7 +29,7 @@ pub use episodes::{
     EpisodeOutcome, EpisodeSpec, MovingRule, Observer, Quiet, RunError, RunOptions,
     episode_success, moving_success, run_episodes,
 };
-pub use mdrlat_core::{Policy, PolicyError, Sensors};
+pub use mdrlat_core::{Decision, Policy, PolicyError, Sensors};
 pub use policy::{ConstantPolicy, RandomPolicy, ReplayPolicy, Scripted, WanderPolicy};
 pub use scene::StaticScene;
 pub use vec_env::{EnvRef, SlotWriter, VecEnv, VecStep};

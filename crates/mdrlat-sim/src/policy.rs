@@ -5,7 +5,7 @@ use crate::config::SimConfig;
 use crate::env::Observation;
 use crate::sensors::{DepthCamera, DepthGeometry, Laser};
 use mdrlat_core::{
-    Action, Policy, PolicyError, Rng, Sensors, TABLE_1, Velocity, act_each, check_batch,
+    Action, Decision, Policy, PolicyError, Rng, Sensors, TABLE_1, Velocity, decide_each,
 };
 
 /// The scripted policies by name (`mdrlat rollout --policy`, `mdrlat eval --policy`).
@@ -158,15 +158,15 @@ impl Policy for RandomPolicy {
             *stream = random_stream(seed);
         }
     }
-    fn act(
+    fn decide(
         &mut self,
         batch: &[&Observation],
         slots: &[usize],
-        out: &mut Vec<Action>,
+        out: &mut Vec<Decision>,
     ) -> Result<(), PolicyError> {
-        act_each(batch, slots, out, |slot, _| {
+        decide_each(batch, slots, out, |slot, _| {
             let a = self.stream(slot).below(Action::COUNT);
-            Action::new(a).unwrap_or_else(|| unreachable!("below(COUNT)"))
+            Ok(Action::new(a).unwrap_or_else(|| unreachable!("below(COUNT)")))
         })
     }
 }
@@ -198,13 +198,13 @@ impl Policy for ConstantPolicy {
     fn sensors(&self) -> Sensors {
         Sensors::NONE
     }
-    fn act(
+    fn decide(
         &mut self,
         batch: &[&Observation],
         slots: &[usize],
-        out: &mut Vec<Action>,
+        out: &mut Vec<Decision>,
     ) -> Result<(), PolicyError> {
-        act_each(batch, slots, out, |_, _| self.action)
+        decide_each(batch, slots, out, |_, _| Ok(self.action))
     }
 }
 
@@ -246,27 +246,13 @@ impl Policy for ReplayPolicy {
             *at = 0;
         }
     }
-    fn act(
+    fn decide(
         &mut self,
         batch: &[&Observation],
         slots: &[usize],
-        out: &mut Vec<Action>,
+        out: &mut Vec<Decision>,
     ) -> Result<(), PolicyError> {
-        let mut commands = Vec::new();
-        self.commands(batch, slots, out, &mut commands)
-    }
-
-    fn commands(
-        &mut self,
-        batch: &[&Observation],
-        slots: &[usize],
-        actions: &mut Vec<Action>,
-        commands: &mut Vec<Velocity>,
-    ) -> Result<(), PolicyError> {
-        check_batch(batch, slots)?;
-        actions.clear();
-        commands.clear();
-        for &slot in slots {
+        decide_each(batch, slots, out, |slot, _| {
             let (Some(list), Some(vels)) = (self.actions.get(slot), self.commands.get(slot)) else {
                 return Err(PolicyError::Backend(format!("no recorded actions for slot {slot}")));
             };
@@ -279,11 +265,9 @@ impl Policy for ReplayPolicy {
             }
             let at = &mut self.at[slot];
             let i = (*at).min(list.len() - 1);
-            actions.push(list[i]);
-            commands.push(vels[i]);
             *at += 1;
-        }
-        Ok(())
+            Ok(Decision { action: list[i], command: vels[i] })
+        })
     }
 }
 
@@ -327,7 +311,7 @@ impl WanderPolicy {
 
 impl WanderPolicy {
     /// The wanderer's action for one observation.
-    fn decide(&mut self, obs: &Observation) -> Action {
+    fn choose(&mut self, obs: &Observation) -> Action {
         self.ranges.clear();
         self.ranges.extend_from_slice(obs.laser.latest());
         if let Some((geometry, body)) = &self.depth {
@@ -362,12 +346,12 @@ impl Policy for WanderPolicy {
     fn sensors(&self) -> Sensors {
         Sensors { laser: true, depth: self.depth.is_some() }
     }
-    fn act(
+    fn decide(
         &mut self,
         batch: &[&Observation],
         slots: &[usize],
-        out: &mut Vec<Action>,
+        out: &mut Vec<Decision>,
     ) -> Result<(), PolicyError> {
-        act_each(batch, slots, out, |_, obs| self.decide(obs))
+        decide_each(batch, slots, out, |_, obs| Ok(self.choose(obs)))
     }
 }

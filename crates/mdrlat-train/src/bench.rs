@@ -4,7 +4,7 @@
 use crate::config::TrainConfig;
 use crate::learner::{Inputs, Learner};
 use crate::replay::{Batch, DepthLayout, ReplayBuffer, Transition};
-use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Observation, Policy, Rng};
+use mdrlat_core::{DEPTH_LEN, FRAME_STACK, LASER_BEAMS, Observation, Rng};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::config::Task;
@@ -156,7 +156,7 @@ pub fn infer_ms(
 }
 
 /// Median milliseconds of one decision of a fresh `variant` policy on one core of the CPU
-/// backend — `Policy::act` on one observation, as the ROS node calls it: the inputs
+/// backend — `Policy::decide` on one observation, as the ROS node calls it: the inputs
 /// normalised, the network, the greedy action — with its linear layers' weights in
 /// bfloat16 when `bf16` ([`crate::GreedyPolicy::with_bf16_weights`]), and the samples.
 ///
@@ -172,9 +172,8 @@ pub fn decision_ms(
         policy = policy.with_bf16_weights()?;
     }
     let obs = random_observations(1, 2);
-    let mut actions = Vec::new();
     Ok(median_ms(min_time, || {
-        let _ = policy.act(&[&obs[0]], &[0], &mut actions);
+        let _ = mdrlat_core::decide_one(&mut policy, &obs[0], 0);
     }))
 }
 
@@ -200,9 +199,9 @@ pub fn policy_batch_ms(
     let obs = random_observations(observations, 6);
     let batch: Vec<&Observation> = obs.iter().collect();
     let slots: Vec<usize> = (0..observations).collect();
-    let mut actions = Vec::new();
+    let mut decisions = Vec::new();
     let (ms, _) = median_ms(min_time, || {
-        let _ = policy.act(&batch, &slots, &mut actions);
+        let _ = policy.decide(&batch, &slots, &mut decisions);
     });
     let flop = mdrlat_nn::QNetConfig::new(variant).decision_flops() as f64 * observations as f64;
     (ms, flop / (ms * 1e-3) / 1e9)

@@ -13,7 +13,7 @@ use crate::learner::{Inputs, Learner};
 use crate::policy::observation_inputs;
 use crate::replay::{FrameId, ReplayBuffer, Transition};
 use crate::timing::Clock;
-use mdrlat_core::{Action, FRAME_STACK, ODOM_HISTORY, Policy, PolicyError, Rng};
+use mdrlat_core::{Action, Decision, FRAME_STACK, ODOM_HISTORY, Policy, PolicyError, Rng};
 use mdrlat_sim::config::Task;
 use mdrlat_sim::{AvoidConfig, AvoidPolicy, Env, Observation, SimConfig, StaticScene};
 use mdrlat_world::World;
@@ -269,7 +269,7 @@ impl TrainEnvs {
 /// watching every environment).
 pub(crate) struct Explorer {
     demonstrator: Option<AvoidPolicy>,
-    demo_actions: Vec<Action>,
+    demo_actions: Vec<Decision>,
     all_envs: Vec<usize>,
     greedy_envs: Vec<usize>,
     inputs: Inputs,
@@ -318,14 +318,14 @@ impl Explorer {
             self.demonstrator = None;
         }
         if let Some(demo) = self.demonstrator.as_mut() {
-            demo.act(&envs.observations(), &self.all_envs, &mut self.demo_actions)
+            demo.decide(&envs.observations(), &self.all_envs, &mut self.demo_actions)
                 .map_err(|source| TrainError::Policy { step: step + 1, source })?;
         }
         for (k, action) in self.actions.iter_mut().enumerate() {
             let epsilon = config.epsilon(step + k as u64);
             if rng.uniform() < f64::from(epsilon) {
                 *action = match self.demo_actions.get(k) {
-                    Some(a) if rng.uniform() < f64::from(config.demo_share) => a.index(),
+                    Some(d) if rng.uniform() < f64::from(config.demo_share) => d.action.index(),
                     _ => rng.below(Action::COUNT),
                 };
             } else {

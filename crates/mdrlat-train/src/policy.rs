@@ -6,8 +6,8 @@
 use crate::checkpoint::read_meta;
 use crate::learner::{Inputs, check_inputs, net_config, q_forward_with, read_net};
 use mdrlat_core::{
-    Action, FRAME_STACK, Observation, Policy, PolicyError, Sensors, catch_panic, check_batch,
-    greedy_actions, normalize_depth, normalize_goal, normalize_laser,
+    Action, Decision, FRAME_STACK, Observation, Policy, PolicyError, Sensors, catch_panic,
+    check_batch, greedy_actions, normalize_depth, normalize_goal, normalize_laser,
 };
 use mdrlat_nn::burn::prelude::*;
 use mdrlat_nn::{QNet, QNetConfig, Variant};
@@ -324,11 +324,11 @@ impl Policy for GreedyPolicy {
         Sensors { laser: v.uses_laser(), depth: v.uses_depth() }
     }
 
-    fn act(
+    fn decide(
         &mut self,
         batch: &[&Observation],
         slots: &[usize],
-        out: &mut Vec<Action>,
+        out: &mut Vec<Decision>,
     ) -> Result<(), PolicyError> {
         check_batch(batch, slots)?;
         if batch.is_empty() {
@@ -373,7 +373,11 @@ impl Policy for GreedyPolicy {
         // A panicking backend is a failed decision, reported as one, not a crash.
         let q = catch_panic("the network backend", forward);
         let q: Vec<f32> = q?.concat();
-        greedy_actions(&q, batch.len(), out)
+        let mut actions = Vec::with_capacity(batch.len());
+        greedy_actions(&q, batch.len(), &mut actions)?;
+        out.clear();
+        out.extend(actions.into_iter().map(Decision::from));
+        Ok(())
     }
 }
 

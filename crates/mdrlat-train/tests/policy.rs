@@ -1,7 +1,7 @@
 //! The network behind the one `Policy` interface: batched decisions equal one-at-a-time
 //! decisions, inputs go through the shared normalisation, bad checkpoints are errors.
 
-use mdrlat_core::{Action, FRAME_STACK, Observation, Policy, Rng};
+use mdrlat_core::{Action, Decision, FRAME_STACK, Observation, Policy, Rng};
 use mdrlat_nn::Variant;
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::config::Task;
@@ -47,23 +47,23 @@ fn a_decision_does_not_depend_on_the_batch_it_is_in() {
         }
         let slots: Vec<usize> = (0..batch.len()).collect();
         let mut actions = Vec::new();
-        policy.act(&batch, &slots, &mut actions).expect("acts");
+        policy.decide(&batch, &slots, &mut actions).expect("acts");
         assert_eq!(actions.len(), batch.len());
         let mut greedy = Vec::new();
         mdrlat_core::greedy_actions(&all, batch.len(), &mut greedy).expect("finite");
-        assert_eq!(actions, greedy);
-        assert!(actions.iter().all(|a| a.index() < Action::COUNT));
+        assert_eq!(actions, greedy.into_iter().map(Decision::from).collect::<Vec<_>>());
+        assert!(actions.iter().all(|d| d.action.index() < Action::COUNT));
 
         // In forwards of a fixed size, any sub-batch decides as the whole batch did.
         let mut fixed = GreedyPolicy::untrained(variant, Task::Avoid, 7, &Device::flex(), 2)
             .expect("policy")
             .with_forward_batch(Some(16));
         let mut whole = Vec::new();
-        fixed.act(&batch, &slots, &mut whole).expect("acts");
+        fixed.decide(&batch, &slots, &mut whole).expect("acts");
         for (start, len) in [(0, 1), (3, 5), (10, 17), (1, 39)] {
             let sub = &batch[start..start + len];
             let mut part = Vec::new();
-            fixed.act(sub, &slots[start..start + len], &mut part).expect("acts");
+            fixed.decide(sub, &slots[start..start + len], &mut part).expect("acts");
             assert_eq!(part, whole[start..start + len], "{variant}: {start}+{len}");
         }
     }
@@ -187,8 +187,8 @@ fn a_single_decision_on_the_calling_thread_decides_as_the_pool_does() {
         assert_eq!(one.q_values(&inputs).expect("q"), want, "{variant}");
         assert_eq!(other.install(|| one.q_values(&inputs)).expect("q"), want, "{variant} nested");
         let (mut a, mut b) = (Vec::new(), Vec::new());
-        one.act(&[&obs], &[0], &mut a).expect("acts");
-        two.act(&[&obs], &[0], &mut b).expect("acts");
+        one.decide(&[&obs], &[0], &mut a).expect("acts");
+        two.decide(&[&obs], &[0], &mut b).expect("acts");
         assert_eq!(a, b, "{variant}");
     }
 }
@@ -208,8 +208,9 @@ fn a_single_decision_is_the_greedy_action_of_its_q_values() {
             let mut want = Vec::new();
             mdrlat_core::greedy_actions(&policy.q_values(&inputs).expect("q"), 1, &mut want)
                 .expect("finite");
+            let want: Vec<Decision> = want.into_iter().map(Decision::from).collect();
             let mut got = Vec::new();
-            policy.act(&[obs], &[0], &mut got).expect("acts");
+            policy.decide(&[obs], &[0], &mut got).expect("acts");
             assert_eq!(got, want, "{variant}");
         }
     }
@@ -225,6 +226,6 @@ fn a_single_observation_of_the_wrong_size_is_an_error_naming_it() {
     let mut obs = Observation::zeros();
     obs.laser = mdrlat_core::FrameStack::new(100);
     let mut out = Vec::new();
-    let e = policy.act(&[&obs], &[0], &mut out).expect_err("wrong size");
+    let e = policy.decide(&[&obs], &[0], &mut out).expect_err("wrong size");
     assert!(e.to_string().contains("laser input has 400 values"), "{e}");
 }

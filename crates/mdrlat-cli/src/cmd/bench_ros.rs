@@ -4,7 +4,7 @@
 use super::bench::cpu_model;
 use super::train::DeviceKind;
 use anyhow::{Context, Result, bail};
-use mdrlat_core::{FRAME_STACK, Observation, Policy};
+use mdrlat_core::{FRAME_STACK, Observation};
 use mdrlat_nn::Variant;
 use mdrlat_ros::msg::{Image, LaserScan, Odometry, Twist};
 use mdrlat_ros::{ControllerConfig, Node, NodeConfig, Trigger};
@@ -82,11 +82,11 @@ pub fn run(a: &RosArgs) -> Result<()> {
         obs.laser.push_slot().fill(2.8);
         obs.depth.push_slot().fill(1.5);
     }
-    let (mut infer, mut actions) = (Vec::new(), Vec::new());
+    let mut infer = Vec::new();
     let start = Instant::now();
     while infer.len() < 20 || start.elapsed() < Duration::from_secs(2) {
         let t = Instant::now();
-        policy.act(&[&obs], &[0], &mut actions)?;
+        mdrlat_core::decide_one(&mut policy, &obs, 0)?;
         infer.push(t.elapsed().as_secs_f64() * 1e3);
     }
     infer.sort_by(f64::total_cmp);

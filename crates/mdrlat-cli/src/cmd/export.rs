@@ -7,7 +7,7 @@
 use super::train::DeviceKind;
 use super::{ensure_dir, load_world};
 use anyhow::{Context, Result, bail};
-use mdrlat_core::{Observation, Policy};
+use mdrlat_core::Observation;
 use mdrlat_sim::config::Task;
 use mdrlat_sim::{Env, SimConfig};
 use mdrlat_train::GreedyPolicy;
@@ -63,11 +63,10 @@ fn observations(policy: &mut GreedyPolicy, n: usize, seed: u64) -> Result<Vec<Ob
         let mut episode = 0u64;
         let mut obs = env.reset(Some(seed + 1000 * w as u64))?.clone();
         let mut steps = 0;
-        let mut actions = Vec::new();
         for _ in 0..per {
             out.push(obs.clone());
-            policy.act(&[&obs], &[0], &mut actions).map_err(|e| anyhow::anyhow!("{e}"))?;
-            let step = env.step(actions[0])?;
+            let d = mdrlat_core::decide_one(policy, &obs, 0).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let step = env.step(d.action)?;
             steps += 1;
             if step.terminated || step.truncated || steps >= 300 {
                 episode += 1;
