@@ -10,6 +10,7 @@ pub mod npy;
 pub mod obs;
 pub mod policy;
 pub mod rng;
+pub mod variant;
 
 pub use action::{Action, TABLE_1, Velocity};
 pub use obs::{
@@ -23,6 +24,7 @@ pub use policy::{
     greedy_actions,
 };
 pub use rng::Rng;
+pub use variant::{Variant, VariantParseError};
 
 /// Robot constants shared by the simulator and the world checks (turtlebot2 / Kobuki).
 pub mod robot {

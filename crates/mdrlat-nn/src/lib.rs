@@ -20,13 +20,13 @@ pub mod host;
 mod init;
 mod net;
 pub mod patches;
-mod variant;
 
+/// The variants are named in `mdrlat-core` (every crate can name one without the networks).
+pub use mdrlat_core::{Variant, VariantParseError};
 pub use net::{
     DepthInput, QNet, QNetConfig, QOutput, StageTime, bilinear, depth_input, depth_patches,
     dueling, is_flex, is_libtorch, is_libtorch_gpu, prefers_depth_patches,
 };
-pub use variant::{Variant, VariantParseError};
 
 /// The burn re-exports the rest of mdrlat builds on, so every crate uses the same version.
 pub use burn;

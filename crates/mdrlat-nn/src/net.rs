@@ -2,11 +2,11 @@
 //! optional auxiliary velocity head.
 
 use crate::patches::PatchGeometry;
-use crate::variant::Variant;
 use burn::nn::conv::{Conv1d, Conv1dConfig, Conv2d, Conv2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig1d, PaddingConfig2d};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
+use mdrlat_core::Variant;
 
 /// Settings of a [`QNet`]. Defaults are the paper's input sizes.
 #[derive(Config, Debug)]

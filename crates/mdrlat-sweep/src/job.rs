@@ -7,7 +7,7 @@
 
 use crate::SweepError;
 use crate::plan::{Job, JobKind, Plan, has_checkpoint, io};
-use mdrlat_nn::Variant;
+use mdrlat_core::Variant;
 use mdrlat_sim::config::Task;
 use std::path::{Path, PathBuf};
 

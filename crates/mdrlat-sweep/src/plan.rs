@@ -5,7 +5,7 @@
 //! last checkpoint).
 
 use crate::{SweepError, spec::Sweep};
-use mdrlat_nn::Variant;
+use mdrlat_core::Variant;
 use std::path::{Path, PathBuf};
 
 /// What a job does.

@@ -2,7 +2,7 @@
 //! how their models are evaluated. A TOML file; four presets are built in.
 
 use crate::SweepError;
-use mdrlat_nn::Variant;
+use mdrlat_core::Variant;
 use mdrlat_plan::MapSource;
 use mdrlat_sim::Scripted;
 use mdrlat_sim::config::Task;

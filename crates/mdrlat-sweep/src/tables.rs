@@ -4,9 +4,9 @@
 
 use crate::SweepError;
 use crate::plan::{Job, JobKind, JobState, Plan, run_name, write_atomic};
+use mdrlat_core::Variant;
 use mdrlat_eval::nav::{NavRecord, NavSummary, navigation_markdown, parse_navigation_csv};
 use mdrlat_eval::{WorldSummary, parse_summary_csv, report::csv_field};
-use mdrlat_nn::Variant;
 use mdrlat_sim::config::Task;
 use std::fmt::Write as _;
 

@@ -1,4 +1,6 @@
-//! The six network variants of the paper's ablation (Fig. 4, Table 2).
+//! The six network variants of the paper's ablation (Fig. 4, Table 2): named here, in the
+//! shared vocabulary, so that every crate (the sweep, the evaluation's tables) can name a
+//! variant without linking the networks (`mdrlat-nn` builds them).
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -23,11 +25,21 @@ pub enum Variant {
 }
 
 /// An unknown variant name.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error(
-    "unknown variant '{0}': expected one of laser-only, depth-only, multi, multi-at, multi-bf, mdrlat"
-)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct VariantParseError(pub String);
+
+impl fmt::Display for VariantParseError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "unknown variant '{}': expected one of laser-only, depth-only, multi, multi-at, \
+             multi-bf, mdrlat",
+            self.0
+        )
+    }
+}
+
+impl std::error::Error for VariantParseError {}
 
 impl Variant {
     /// All variants, in the paper's order.
