@@ -97,6 +97,9 @@ pub struct TrainConfig {
     /// `--resume --steps` (false: a short run leaves its weights, `model.safetensors`, and no
     /// optimiser state or replay: the demo's 300-step run).
     pub final_checkpoint: bool,
+    /// How the run's final `model.safetensors` stores its weights (`f16`: half the size,
+    /// the same greedy actions in practice; the demo's pipeline check writes f16).
+    pub model_precision: Precision,
 }
 
 impl Default for TrainConfig {
@@ -132,6 +135,7 @@ impl Default for TrainConfig {
             curve_min_reach_m: mdrlat_sim::MovingRule::DEFAULT.min_reach_m,
             checkpoint_interval: 10_000,
             final_checkpoint: true,
+            model_precision: Precision::F32,
         }
     }
 }
@@ -146,6 +150,17 @@ pub enum AuxOptimizer {
     Separate,
     /// One Adam on the weighted sum of both losses.
     Joint,
+}
+
+/// How a model file stores its weights.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    /// 32-bit floats, as trained.
+    #[default]
+    F32,
+    /// IEEE half precision: half the size, for shipping a model (loaded back as f32).
+    F16,
 }
 
 /// An inconsistent or out-of-range setting.

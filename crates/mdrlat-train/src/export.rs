@@ -20,14 +20,7 @@ use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::Path;
 
-/// How a model file stores its weights.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Precision {
-    /// 32-bit floats, as trained.
-    F32,
-    /// IEEE half precision: half the size, for shipping a model (loaded back as f32).
-    F16,
-}
+pub use crate::config::Precision;
 
 /// Writes `net` to `path` in safetensors format (f32).
 ///

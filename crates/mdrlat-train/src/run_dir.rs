@@ -107,18 +107,23 @@ impl RunDir {
         std::fs::write(&path, config.to_toml()).map_err(io(&path))
     }
 
-    /// Writes the online network's weights (f32) to `model.safetensors`, recording the
-    /// step in its metadata.
+    /// Writes the online network's weights to `model.safetensors` in `precision`,
+    /// recording the step in its metadata.
     ///
     /// # Errors
     /// The file cannot be written.
-    pub fn save_model(&self, learner: &Learner, step: u64) -> Result<(), TrainError> {
+    pub fn save_model(
+        &self,
+        learner: &Learner,
+        step: u64,
+        precision: crate::config::Precision,
+    ) -> Result<(), TrainError> {
         let path = self.model();
         crate::export::save_safetensors_as(
             &learner.policy_net(),
             learner.net_config(),
             &path,
-            crate::export::Precision::F32,
+            precision,
             &[("mdrlat_step", step.to_string())],
         )
         .map_err(|problem| TrainError::Checkpoint { path, problem })

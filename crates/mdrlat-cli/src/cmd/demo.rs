@@ -186,6 +186,8 @@ fn pipeline(a: &Args) -> Result<()> {
             .chain([
                 format!("train.checkpoint_interval={}", a.train_steps + 1),
                 "train.final_checkpoint=false".into(),
+                // Its weights in half precision: a 300-step check, not a model to ship.
+                "train.model_precision=\"f16\"".into(),
             ])
             .collect(),
         eval: EvalSpec {

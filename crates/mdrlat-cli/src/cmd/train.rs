@@ -224,7 +224,7 @@ pub fn run(a: &Args) -> Result<()> {
         on_step,
     )?;
     pb.finish_and_clear();
-    dir.save_model(&learner, report.steps)?;
+    dir.save_model(&learner, report.steps, config.train.model_precision)?;
     let last = report.evaluations.last().map(|e| {
         let reached = if config.sim.task == Task::Nav {
             format!(", {:.0}% of goals reached", 100.0 * e.success_rate())
