@@ -148,9 +148,148 @@ impl EventWriter {
     }
 }
 
+/// One event's wall time (seconds since the epoch) and step (none for a file's first).
+fn read_events(path: &Path) -> std::io::Result<Vec<(f64, Option<u64>)>> {
+    let bytes = std::fs::read(path)?;
+    let bad = |what: &str| {
+        std::io::Error::new(std::io::ErrorKind::InvalidData, format!("{}: {what}", path.display()))
+    };
+    let mut events = Vec::new();
+    let mut pos = 0;
+    while pos + 12 <= bytes.len() {
+        let len = u64::from_le_bytes(bytes[pos..pos + 8].try_into().map_err(|_| bad("length"))?);
+        let n = usize::try_from(len).map_err(|_| bad("length"))?;
+        let Some(data) = bytes.get(pos + 12..pos + 12 + n) else {
+            break; // a record cut short by a killed run: the ones before it stand
+        };
+        pos += 16 + n;
+        let (mut wall, mut step, mut i) = (None, None, 0);
+        while i < data.len() {
+            let key = data[i];
+            i += 1;
+            match key & 7 {
+                1 => {
+                    let v = data.get(i..i + 8).ok_or_else(|| bad("fixed64"))?;
+                    if key >> 3 == 1 {
+                        wall = Some(f64::from_le_bytes(v.try_into().map_err(|_| bad("fixed64"))?));
+                    }
+                    i += 8;
+                }
+                0 | 2 => {
+                    let (mut v, mut shift) = (0u64, 0);
+                    loop {
+                        let b = *data.get(i).ok_or_else(|| bad("varint"))?;
+                        i += 1;
+                        v |= u64::from(b & 0x7f) << shift.min(63);
+                        shift += 7;
+                        if b < 0x80 {
+                            break;
+                        }
+                    }
+                    if key & 7 == 2 {
+                        i += usize::try_from(v).map_err(|_| bad("length"))?;
+                    } else if key >> 3 == 2 {
+                        step = Some(v);
+                    }
+                }
+                5 => i += 4,
+                _ => return Err(bad("unknown wire type")),
+            }
+        }
+        if let Some(w) = wall {
+            events.push((w, step));
+        }
+    }
+    Ok(events)
+}
+
+/// Seconds of training at each logged step of the run in `dir`, from its event files' wall
+/// times: each session (one event file) counts from its start, and a session's time after
+/// the step the next one resumed from (work redone after a restart) is left out. Steps in
+/// increasing order. Wall-clock time depends on the machine and what ran beside the run: a
+/// figure from it names the CPU.
+///
+/// # Errors
+/// The folder or an event file cannot be read.
+pub fn training_seconds(dir: &Path) -> std::io::Result<Vec<(u64, f64)>> {
+    let mut sessions = Vec::new();
+    for entry in std::fs::read_dir(dir)? {
+        let path = entry?.path();
+        if path.file_name().is_some_and(|n| n.to_string_lossy().contains("tfevents")) {
+            let events = read_events(&path)?;
+            if let Some(&(start, _)) = events.first() {
+                let steps: Vec<(u64, f64)> =
+                    events.iter().filter_map(|&(w, s)| s.map(|s| (s, w - start))).collect();
+                sessions.push((start, steps));
+            }
+        }
+    }
+    sessions.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut out: Vec<(u64, f64)> = Vec::new();
+    let mut offset = 0.0;
+    for (k, (_, steps)) in sessions.iter().enumerate() {
+        // The step the next session resumed from: its first event's (the restart mark).
+        let resumed = sessions.get(k + 1).and_then(|(_, s)| s.first()).map(|&(s, _)| s);
+        let kept: Vec<(u64, f64)> =
+            steps.iter().copied().filter(|&(s, _)| resumed.is_none_or(|r| s <= r)).collect();
+        out.retain(|&(s, _)| kept.first().is_none_or(|&(first, _)| s < first));
+        out.extend(kept.iter().map(|&(s, t)| (s, offset + t)));
+        offset += kept.last().map_or(0.0, |&(_, t)| t);
+    }
+    out.sort_by_key(|&(s, _)| s);
+    out.dedup_by_key(|p| p.0);
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An event file with chosen wall times: its start, then `(wall, step)` scalars, then
+    /// (for a resumed session) the restart mark first.
+    fn session(dir: &Path, name: &str, start: f64, resumed: Option<u64>, events: &[(f64, u64)]) {
+        let path = dir.join(format!("events.out.tfevents.{name}"));
+        let mut w = EventWriter { out: BufWriter::new(File::create(&path).expect("file")), path };
+        let mut ev = vec![0x09];
+        ev.extend_from_slice(&start.to_le_bytes());
+        len_field(0x1a, b"brain.Event:2", &mut ev);
+        w.record(&ev).expect("write");
+        let mut at = |wall: f64, step: u64, payload: &[u8]| {
+            let mut ev = vec![0x09];
+            ev.extend_from_slice(&wall.to_le_bytes());
+            ev.push(0x10);
+            varint(step, &mut ev);
+            ev.extend_from_slice(payload);
+            w.record(&ev).expect("write");
+        };
+        if let Some(r) = resumed {
+            at(start, r, &[0x32, 2, 0x08, 0x01]);
+        }
+        for &(wall, step) in events {
+            at(wall, step, &[0x2a, 0]);
+        }
+        w.flush().expect("flush");
+    }
+
+    #[test]
+    fn training_time_counts_each_session_and_leaves_out_redone_work() {
+        let dir = std::env::temp_dir().join(format!("mdrlat-tb-time-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("dir");
+        // Session 1: 100 s to step 100, 200 s to 200, 300 s to 300 (killed; checkpoint at 200).
+        session(&dir, "1", 1000.0, None, &[(1100.0, 100), (1200.0, 200), (1300.0, 300)]);
+        // Session 2, a day later, resumes at 200: 50 s to step 300, 150 s to 400.
+        session(&dir, "2", 90_000.0, Some(200), &[(90_050.0, 300), (90_150.0, 400)]);
+        let t = training_seconds(&dir).expect("reads");
+        assert_eq!(t, vec![(100, 100.0), (200, 200.0), (300, 250.0), (400, 350.0)]);
+        // The writer's own files read back.
+        let mut w = EventWriter::create(&dir.join("..").join(dir.file_name().expect("name")))
+            .expect("create");
+        w.scalars(500, &[("losses/td", 1.0)]).expect("write");
+        w.flush().expect("flush");
+        assert!(training_seconds(&dir).expect("reads").iter().any(|&(s, _)| s == 500));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn crc32c_test_vector() {

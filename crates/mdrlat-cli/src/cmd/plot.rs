@@ -42,6 +42,49 @@ pub struct Args {
     /// band their spread (± std over runs), as the paper's Fig. 4 draws six curves.
     #[arg(long)]
     by_variant: bool,
+    /// The x-axis: training steps, or minutes of training (from the runs' TensorBoard wall
+    /// times, each session counted, work redone after a restart left out; name the CPU
+    /// beside such a figure).
+    #[arg(long, value_enum, default_value = "steps")]
+    x: XAxis,
+}
+
+/// What the x-axis counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum XAxis {
+    /// Environment steps.
+    Steps,
+    /// Minutes of training.
+    Minutes,
+}
+
+impl XAxis {
+    fn label(self) -> &'static str {
+        match self {
+            XAxis::Steps => "training steps",
+            XAxis::Minutes => "minutes of training",
+        }
+    }
+}
+
+/// The x value of each step of the run in `dir`: the step, or its minutes of training.
+fn x_of(dir: &Path, axis: XAxis) -> Result<Box<dyn Fn(f32) -> f32>> {
+    match axis {
+        XAxis::Steps => Ok(Box::new(|step| step)),
+        XAxis::Minutes => {
+            let times = mdrlat_train::tensorboard::training_seconds(dir).with_context(|| {
+                format!("{}: reading its TensorBoard wall times", dir.display())
+            })?;
+            if times.is_empty() {
+                bail!("{}: no TensorBoard events to time the run by", dir.display());
+            }
+            Ok(Box::new(move |step| {
+                // The last logged step at or before this one.
+                let i = times.partition_point(|&(s, _)| s as f32 <= step).max(1) - 1;
+                (times[i].1 / 60.0) as f32
+            }))
+        }
+    }
 }
 
 impl Args {
@@ -53,6 +96,7 @@ impl Args {
             smooth: 0.6,
             metric: Metric::Eval,
             by_variant: true,
+            x: XAxis::Steps,
         }
     }
 }
@@ -199,9 +243,15 @@ pub fn run(a: &Args) -> Result<()> {
     if !(0.0..1.0).contains(&a.smooth) {
         bail!("--smooth {}: must be in [0, 1)", a.smooth);
     }
+    if a.x == XAxis::Minutes && a.by_variant {
+        bail!(
+            "--x minutes with --by-variant: runs of one variant are averaged at common steps, not minutes"
+        );
+    }
     let mut series = Vec::new();
     for dir in &a.runs {
         let (label, variant) = run_label(dir);
+        let x = x_of(dir, a.x)?;
         let s = match a.metric {
             Metric::Eval => {
                 let c = read_csv(
@@ -211,11 +261,11 @@ pub fn run(a: &Args) -> Result<()> {
                 let (mean, std) = (smooth(&c[1], a.smooth), smooth(&c[2], a.smooth));
                 Series {
                     label,
-                    points: c[0].iter().copied().zip(mean.iter().copied()).collect(),
+                    points: c[0].iter().map(|&s| x(s)).zip(mean.iter().copied()).collect(),
                     band: c[0]
                         .iter()
                         .zip(mean.iter().zip(&std))
-                        .map(|(&x, (&m, &s))| (x, m - s, m + s))
+                        .map(|(&s, (&m, &sd))| (x(s), m - sd, m + sd))
                         .collect(),
                 }
             }
@@ -235,7 +285,7 @@ pub fn run(a: &Args) -> Result<()> {
                 let ys = smooth(&keep.iter().map(|p| p.1).collect::<Vec<_>>(), a.smooth);
                 Series {
                     label,
-                    points: keep.iter().map(|p| p.0).zip(ys).collect(),
+                    points: keep.iter().map(|p| x(p.0)).zip(ys).collect(),
                     band: Vec::new(),
                 }
             }
@@ -258,7 +308,7 @@ pub fn run(a: &Args) -> Result<()> {
     };
     let (width, height) = (1000, 620);
     let img = line_chart(
-        &Chart { title, x_label: "training steps", y_label: y, series: &series },
+        &Chart { title, x_label: a.x.label(), y_label: y, series: &series },
         width,
         height,
     );
@@ -271,7 +321,7 @@ pub fn run(a: &Args) -> Result<()> {
             .iter()
             .map(|(title, y, series)| {
                 line_chart(
-                    &Chart { title, x_label: "training steps", y_label: y, series },
+                    &Chart { title, x_label: a.x.label(), y_label: y, series },
                     width,
                     height,
                 )
@@ -322,6 +372,7 @@ fn curve_panels(a: &Args) -> Result<Vec<(String, &'static str, Vec<Series>)>> {
             }
             let c = read_csv(&path, &["step", &train, &unseen])?;
             let (label, variant) = run_label(dir);
+            let x = x_of(dir, a.x)?;
             let world = curve_settings(dir).and_then(|s| s.0).unwrap_or_else(|| "unseen".into());
             for (ys, which) in [(&c[2], world), (&c[1], "train, held-out starts".to_string())] {
                 let keep: Vec<(f32, f32)> = c[0]
@@ -338,7 +389,7 @@ fn curve_panels(a: &Args) -> Result<Vec<(String, &'static str, Vec<Series>)>> {
                     format!("{variant}: {which}"),
                     Series {
                         label: format!("{label}: {which}"),
-                        points: keep.iter().map(|p| p.0).zip(smoothed).collect(),
+                        points: keep.iter().map(|p| x(p.0)).zip(smoothed).collect(),
                         band: Vec::new(),
                     },
                 ));
