@@ -14,7 +14,7 @@ use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS};
 use mdrlat_geom::Vec2;
 use mdrlat_render::{
     Chart, Image, LaserRays, RobotMark, Scene, Series, depth_view, line_chart, map_frame,
-    side_by_side, stacked, top_view,
+    side_by_side, stacked, titled, top_view,
 };
 use mdrlat_sim::rollout::TrajectoryRow;
 use mdrlat_sim::{
@@ -51,14 +51,19 @@ pub fn snapshot(env: &Env, trail: &[Vec2], caption: &str, collided: bool, scale:
         ..Scene::new(env.world())
     };
     let top = top_view(&scene, scale);
+    // The depth image as tall as the map beside it allows (whole pixels per depth pixel),
+    // under its title.
+    let text = if top.height >= 400 { 2 } else { 1 };
+    let depth_scale = (top.height.saturating_sub(40 * text) / DEPTH_ROWS as u32).clamp(1, 3);
     let depth = depth_view(
         obs.depth.latest(),
         DEPTH_ROWS,
         DEPTH_COLS,
         env.depth_camera().config().max_range_m,
-        2,
+        depth_scale,
     );
-    side_by_side(&[&top, &depth], 12)
+    let title = format!("depth camera, {DEPTH_COLS}x{DEPTH_ROWS}, metres");
+    side_by_side(&[&top, &titled(&depth, &title, text)], 12)
 }
 
 /// Top views in a strip.

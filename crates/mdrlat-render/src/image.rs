@@ -154,6 +154,17 @@ pub fn side_by_side(images: &[&Image], gap: u32) -> Image {
     out
 }
 
+/// `image` with `title` above it (built-in font at `scale`, dark grey on white; lines split
+/// at `\n`).
+pub fn titled(image: &Image, title: &str, scale: u32) -> Image {
+    let scale = scale.max(1);
+    let (w, h) = (font::text_width(title, scale), font::text_height(title, scale));
+    let pad = 4 * scale;
+    let mut head = Image::new(image.width.max(w), h + 2 * pad, PAPER);
+    head.draw_text(0, pad as i32, title, scale, [40, 40, 40, 255]);
+    stacked(&[&head, image], 0)
+}
+
 /// Puts pictures below each other, top to bottom, left-aligned, `gap` pixels apart;
 /// narrower ones are padded with white on the right. An empty list gives a 0×0 picture.
 pub fn stacked(images: &[&Image], gap: u32) -> Image {

@@ -25,6 +25,6 @@ pub use animation::{GifWriter, PALETTE_LEN};
 pub use chart::{Chart, Series, line_chart, series_colour};
 pub use depth::{depth_colour, depth_view};
 pub use error::RenderError;
-pub use image::{Image, side_by_side, stacked};
+pub use image::{Image, side_by_side, stacked, titled};
 pub use style::{HeightClass, LASER_PLANE_M};
-pub use top::{LaserRays, MapFrame, RobotMark, Scene, map_frame, top_view};
+pub use top::{LaserRays, MapFrame, RobotMark, Scene, map_frame, top_view, world_picture};

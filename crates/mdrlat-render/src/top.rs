@@ -56,6 +56,31 @@ impl<'a> Scene<'a> {
     }
 }
 
+/// A world's picture on its own: its obstacles, spawn and goal regions, and its walkers at
+/// the first point of their paths (where the file starts them; an episode draws their starts
+/// along the paths), captioned with the world's name and description.
+pub fn world_picture(world: &World, px_per_m: f32) -> crate::Image {
+    let walkers: Vec<(Vec2, f32, f32)> = world
+        .pedestrians
+        .iter()
+        .filter_map(|p| p.waypoints.first().map(|&at| (at, p.radius, p.height)))
+        .collect();
+    let mut caption = format!("{}: {}", world.name, world.description);
+    if !walkers.is_empty() {
+        caption.push_str(&format!(
+            "\n{} walker{} drawn at the first point of {} path{}.",
+            walkers.len(),
+            if walkers.len() == 1 { "" } else { "s" },
+            if walkers.len() == 1 { "its" } else { "their" },
+            if walkers.len() == 1 { "" } else { "s" },
+        ));
+    }
+    top_view(
+        &Scene { caption: Some(&caption), pedestrians: &walkers, ..Scene::new(world) },
+        px_per_m,
+    )
+}
+
 /// The robot as drawn: a disc with a heading line.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RobotMark {

@@ -420,11 +420,28 @@ paper_std_pct,path_m_mean,min_path_m,min_reach_m,missing\n",
             sw.steps,
             sw.world
         );
+        // Each row's best mean in bold (every method that ties it), the rest plain.
         let ours = |metric: Metric| {
             move |w: &str, m: &Method| {
-                self.cell(w, m)
-                    .and_then(|c| c.metric_stats(metric))
-                    .map_or("—".to_string(), |(a, b)| format!("**{a:.1} ± {b:.1}**"))
+                let best = self
+                    .methods
+                    .iter()
+                    .filter_map(|m| self.cell(w, m).and_then(|c| c.metric_stats(metric)))
+                    .map(|(a, _)| format!("{a:.1}"))
+                    .max_by(|a, b| {
+                        a.parse::<f64>().unwrap_or(0.0).total_cmp(&b.parse().unwrap_or(0.0))
+                    });
+                self.cell(w, m).and_then(|c| c.metric_stats(metric)).map_or(
+                    "—".to_string(),
+                    |(a, b)| {
+                        let text = format!("{a:.1} ± {b:.1}");
+                        if best.as_deref() == Some(format!("{a:.1}").as_str()) {
+                            format!("**{text}**")
+                        } else {
+                            text
+                        }
+                    },
+                )
             }
         };
         if nav {
@@ -904,6 +921,17 @@ mod tests {
         assert_eq!(c[3].holds, Some(false));
         let only_two = claims(&table(&[(LaserOnly, 0.5), (Mdrlat, 0.6)]), Metric::Paper);
         assert!(only_two.iter().all(|c| c.holds.is_none()));
+    }
+
+    #[test]
+    fn only_each_rows_best_is_bold() {
+        use Variant::*;
+        let dir = std::env::temp_dir().join(format!("mdrlat-sweep-bold-{}", std::process::id()));
+        let plan = Plan::new(Sweep::preset("smoke").expect("smoke"), &dir);
+        let md = table(&[(LaserOnly, 0.5), (Multi, 0.8), (Mdrlat, 0.8)]).markdown(&plan);
+        let paper = md.find("## Success (%)").expect("the paper's table");
+        let row = md[paper..].lines().find(|l| l.starts_with("| office |")).expect("a row");
+        assert_eq!(row, "| office | 50.0 ± 1.0 | **80.0 ± 1.0** | **80.0 ± 1.0** |", "{md}");
     }
 
     #[test]

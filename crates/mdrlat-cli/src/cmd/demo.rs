@@ -13,7 +13,6 @@ use crate::progress;
 use anyhow::{Context, Result};
 use mdrlat_eval::{Agent, EvalObserver, EvalSettings, Output};
 use mdrlat_nn::Variant;
-use mdrlat_render::{Scene, top_view};
 use mdrlat_sim::{EpisodeSpec, Scripted};
 use mdrlat_sweep::local::{Event, LocalOptions};
 use mdrlat_sweep::tables::{Metric, Table2};
@@ -337,9 +336,7 @@ pub fn run(a: &Args) -> Result<()> {
     ensure_dir(&worlds_dir)?;
     for name in mdrlat_world::builtin::NAMES {
         let w = load_world(name)?;
-        let caption = format!("{}: {}", w.name, w.description);
-        let img =
-            top_view(&Scene { caption: Some(&caption), ..Scene::new(&w) }, px_per_m(&w, 560.0));
+        let img = mdrlat_render::world_picture(&w, px_per_m(&w, 560.0));
         img.save_png(&worlds_dir.join(format!("{name}.png")))?;
     }
     out!("  {}/*.png: every built-in world from above", worlds_dir.display());

@@ -3,7 +3,6 @@
 use super::{ensure_parent, load_world, make_env, parse_pose, px_per_m, snapshot};
 use crate::config::Config;
 use anyhow::Result;
-use mdrlat_render::{Scene, top_view};
 use std::path::PathBuf;
 
 /// Arguments of `mdrlat render`.
@@ -39,8 +38,7 @@ pub fn run(a: &Args) -> Result<()> {
     let scale = a.scale.unwrap_or_else(|| px_per_m(&world, 640.0));
     ensure_parent(&a.out)?;
     let picture = if a.world_only {
-        let caption = format!("{}: {}", world.name, world.description);
-        top_view(&Scene { caption: Some(&caption), ..Scene::new(&world) }, scale)
+        mdrlat_render::world_picture(&world, scale)
     } else {
         let mut env = make_env(world, &config.sim)?;
         let pose = a.pose.as_deref().map(parse_pose).transpose()?;
