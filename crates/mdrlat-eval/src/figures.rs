@@ -321,7 +321,7 @@ pub fn draw_episode(
                 robot: Some(RobotMark {
                     pose: env.pose(),
                     radius: sim.robot.radius_m,
-                    collided: row.terminated,
+                    collided: row.info.collision.is_some(),
                 }),
                 pedestrians: &peds,
                 trail: &trail[..upto],
@@ -378,7 +378,12 @@ pub fn draw_episode(
         ending,
         record.path_m
     );
-    let head = captioned(&Image::new(strip.width.max(chart.width), 1, PAPER), &headline);
+    // The headline wrapped to the strip's width at spaces (a narrow strip, as a small
+    // world's crop gives, would cut one long line at its right edge).
+    let width = strip.width.max(chart.width);
+    let char_w = mdrlat_render::font::text_width("m", 2).max(1);
+    let wrapped = mdrlat_render::font::wrap(&headline, (width.saturating_sub(8) / char_w) as usize);
+    let head = captioned(&Image::new(width, 1, PAPER), &wrapped.join("\n"));
     let strip = stacked(&[&head, &strip, &chart], 6);
 
     let last_pose = capture.rows.last().map_or(record.start, |r| r.info.pose);
