@@ -28,7 +28,8 @@ pub struct BridgeSettings {
 }
 
 impl BridgeSettings {
-    /// Checks the numbers, naming the bad one.
+    /// Checks the numbers, naming the bad one by its field (`speed`, `cmd_timeout_s`,
+    /// `duration_s`).
     ///
     /// # Errors
     /// A speed outside [0.01, 100], a timeout outside (0, 60] or a negative duration.
@@ -38,11 +39,11 @@ impl BridgeSettings {
         }
         let t = self.cmd_timeout_s;
         if !(t.is_finite() && t > 0.0 && t <= 60.0) {
-            return Err(format!("command timeout {t} s: expected seconds in (0, 60]"));
+            return Err(format!("cmd_timeout_s {t}: expected seconds in (0, 60]"));
         }
         if !(self.duration_s.is_finite() && self.duration_s >= 0.0) {
             return Err(format!(
-                "duration {} s: expected a non-negative number of seconds",
+                "duration_s {}: expected a non-negative number of seconds",
                 self.duration_s
             ));
         }

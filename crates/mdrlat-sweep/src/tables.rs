@@ -423,19 +423,20 @@ paper_std_pct,path_m_mean,min_path_m,min_reach_m,missing\n",
         // Each row's best mean in bold (every method that ties it), the rest plain.
         let ours = |metric: Metric| {
             move |w: &str, m: &Method| {
+                // Compared as shown, to one decimal (tenths of a percent).
+                let tenths = |a: f64| (a * 10.0).round() as i64;
                 let best = self
                     .methods
                     .iter()
                     .filter_map(|m| self.cell(w, m).and_then(|c| c.metric_stats(metric)))
-                    .map(|(a, _)| format!("{a:.1}"))
-                    .max_by(|a, b| {
-                        a.parse::<f64>().unwrap_or(0.0).total_cmp(&b.parse().unwrap_or(0.0))
-                    });
+                    .filter(|(a, _)| a.is_finite())
+                    .map(|(a, _)| tenths(a))
+                    .max();
                 self.cell(w, m).and_then(|c| c.metric_stats(metric)).map_or(
                     "—".to_string(),
                     |(a, b)| {
                         let text = format!("{a:.1} ± {b:.1}");
-                        if best.as_deref() == Some(format!("{a:.1}").as_str()) {
+                        if a.is_finite() && best == Some(tenths(a)) {
                             format!("**{text}**")
                         } else {
                             text

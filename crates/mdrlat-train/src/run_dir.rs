@@ -153,10 +153,6 @@ impl RunDir {
     pub fn checkpoint(&self) -> PathBuf {
         self.root.join("checkpoint")
     }
-    /// Whether a checkpoint is there to resume from.
-    pub fn has_checkpoint(&self) -> bool {
-        self.checkpoint().join("meta.json").is_file()
-    }
     /// `model.safetensors`.
     pub fn model(&self) -> PathBuf {
         self.root.join("model.safetensors")

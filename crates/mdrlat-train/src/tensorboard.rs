@@ -129,13 +129,13 @@ impl EventWriter {
     /// # Errors
     /// A write error.
     pub fn session_start(&mut self, step: u64) -> std::io::Result<()> {
-        // Event { wall_time = 1, step = 2, session_log = 6 { status = 1: START } }
+        // Event { wall_time = 1, step = 2, session_log = 7 { status = 1: START } }
         let mut ev = Vec::new();
         ev.push(0x09);
         ev.extend_from_slice(&wall_time().to_le_bytes());
         ev.push(0x10);
         varint(step, &mut ev);
-        len_field(0x32, &[0x08, 0x01], &mut ev);
+        len_field(0x3a, &[0x08, 0x01], &mut ev);
         self.record(&ev)
     }
 
@@ -159,10 +159,10 @@ fn read_events(path: &Path) -> std::io::Result<Vec<(f64, Option<u64>)>> {
     while pos + 12 <= bytes.len() {
         let len = u64::from_le_bytes(bytes[pos..pos + 8].try_into().map_err(|_| bad("length"))?);
         let n = usize::try_from(len).map_err(|_| bad("length"))?;
-        let Some(data) = bytes.get(pos + 12..pos + 12 + n) else {
+        let Some(data) = bytes.get(pos + 12..).and_then(|rest| rest.get(..n)) else {
             break; // a record cut short by a killed run: the ones before it stand
         };
-        pos += 16 + n;
+        pos = pos.saturating_add(16).saturating_add(n);
         let (mut wall, mut step, mut i) = (None, None, 0);
         while i < data.len() {
             let key = data[i];
@@ -187,7 +187,7 @@ fn read_events(path: &Path) -> std::io::Result<Vec<(f64, Option<u64>)>> {
                         }
                     }
                     if key & 7 == 2 {
-                        i += usize::try_from(v).map_err(|_| bad("length"))?;
+                        i = i.saturating_add(usize::try_from(v).map_err(|_| bad("length"))?);
                     } else if key >> 3 == 2 {
                         step = Some(v);
                     }
@@ -263,7 +263,7 @@ mod tests {
             w.record(&ev).expect("write");
         };
         if let Some(r) = resumed {
-            at(start, r, &[0x32, 2, 0x08, 0x01]);
+            at(start, r, &[0x3a, 2, 0x08, 0x01]);
         }
         for &(wall, step) in events {
             at(wall, step, &[0x2a, 0]);

@@ -51,7 +51,8 @@ pub struct TrainReport {
     pub timing: Timing,
 }
 
-/// Trains `config.variant` in `envs` (one environment per `train.envs`) for
+/// Trains `config.variant` in `envs` (one environment per `train.envs`, freshly built: the
+/// run starts or restores every one of them) for
 /// `config.total_steps` steps on `device`, into the run directory `dir`; with `resume`,
 /// continues exactly from its checkpoint. `progress` is called after every step. Fig. 4's
 /// evaluations and the learning curves' held-out starts are in the first world of `envs`.
@@ -60,7 +61,7 @@ pub struct TrainReport {
 /// Invalid settings, a simulator failure, a missing or bad checkpoint, or a file that
 /// cannot be written.
 pub fn train(
-    envs: &mut TrainEnvs,
+    mut envs: TrainEnvs,
     sim: &SimConfig,
     config: &TrainConfig,
     device: &Device,
@@ -102,7 +103,7 @@ pub fn train(
     let mut done_steps = run.step;
     while done_steps < config.total_steps {
         // Line 3: ε-greedy on each environment's s_k (the greedy ones in one forward pass).
-        explorer.choose(envs, &learner, config, done_steps, &mut run.explore_rng)?;
+        explorer.choose(&envs, &learner, config, done_steps, &mut run.explore_rng)?;
         clock.split(|t| &mut t.acting);
         let mut checkpoint_due = false;
         for k in 0..envs.len() {

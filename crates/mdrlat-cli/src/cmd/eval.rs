@@ -122,7 +122,12 @@ impl Args {
             checkpoint,
             policy,
             worlds: e.worlds.clone(),
-            task: TaskArgs { task: Some(e.task), start: None, goal: None },
+            // As the command line it shows as: `--task` only when not the default.
+            task: TaskArgs {
+                task: (e.task != Task::Avoid).then_some(e.task),
+                start: None,
+                goal: None,
+            },
             episodes: e.episodes,
             runs: e.runs,
             max_steps: e.max_steps,

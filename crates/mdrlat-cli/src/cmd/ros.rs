@@ -326,7 +326,9 @@ pub fn sim(a: &SimArgs) -> Result<()> {
         duration_s: a.duration_s,
     };
     if let Err(e) = settings.validate() {
-        bail!("--{e}");
+        // The field first, as its flag: `cmd_timeout_s 0: …` → `--cmd-timeout-s 0: …`.
+        let (field, rest) = e.split_once(' ').unwrap_or((&e, ""));
+        bail!("--{} {rest}", field.replace('_', "-"));
     }
     let mut config = Config::load_or_default(a.config.as_deref())?.sim;
     config.max_episode_steps = if a.episode_steps == 0 { u32::MAX } else { a.episode_steps };

@@ -114,7 +114,12 @@ impl Args {
             variant: Some(t.variant),
             world: Some(t.world.clone()),
             preset: t.preset.parse().map_err(anyhow::Error::msg)?,
-            task: TaskArgs { task: Some(t.task), start: None, goal: None },
+            // As the command line it shows as: `--task` only when not the default.
+            task: TaskArgs {
+                task: (t.task != mdrlat_sim::config::Task::Avoid).then_some(t.task),
+                start: None,
+                goal: None,
+            },
             steps: Some(t.steps),
             seed: Some(t.seed),
             out: Some(t.out.clone()),
@@ -193,7 +198,7 @@ pub fn run(a: &Args) -> Result<()> {
         Some(dir) => dir,
         None => RunDir::create(&root, &config, &info)?,
     };
-    let mut envs = mdrlat_train::TrainEnvs::new(worlds, &config.sim, config.train.envs)?;
+    let envs = mdrlat_train::TrainEnvs::new(worlds, &config.sim, config.train.envs)?;
 
     let total = config.train.total_steps;
     let pb = ProgressBar::new(total);
@@ -215,7 +220,7 @@ pub fn run(a: &Args) -> Result<()> {
         }
     };
     let (report, learner) = mdrlat_train::train(
-        &mut envs,
+        envs,
         &config.sim,
         &config.train,
         &device.device(),

@@ -17,6 +17,6 @@ pub fn train(
     resume: bool,
     progress: impl FnMut(&Status),
 ) -> Result<(TrainReport, Learner), TrainError> {
-    let mut envs = TrainEnvs::new(worlds, sim, config.envs)?;
-    mdrlat_train::train(&mut envs, sim, config, device, &RunDir::at(dir), resume, progress)
+    let envs = TrainEnvs::new(worlds, sim, config.envs)?;
+    mdrlat_train::train(envs, sim, config, device, &RunDir::at(dir), resume, progress)
 }
