@@ -15,12 +15,12 @@ macro_rules! out {
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-/// Tells mimalloc to keep the memory it frees instead of purging it back to the OS after
-/// its default 10 ms: a learner step (~45 ms for MDRLAT) frees its multi-megabyte buffers
-/// and allocates them again in the next step, and purged memory comes back through page
-/// faults and the kernel zeroing every page again (17,000 faults and ~6 % of the learner's
-/// time in `clear_page_erms` over a 3-second `bench train --variants mdrlat`; 530 faults
-/// without the purge). The process keeps its peak footprint, which a training run reaches in
+/// Tells mimalloc to keep the memory it frees instead of purging it back to the OS after its
+/// default 10 ms: a learner step (longer than that for MDRLAT) frees its multi-megabyte buffers and
+/// allocates them again in the next step, and purged memory comes back through page faults and the
+/// kernel zeroing every page again (17,000 faults and a visible share of the learner's time in
+/// `clear_page_erms` over a 3-second `bench train --variants mdrlat`; 530 faults without the purge;
+/// see docs/performance.md). The process keeps its peak footprint, which a training run reaches in
 /// its first steps anyway. `MIMALLOC_PURGE_DELAY` in the environment still decides when set.
 #[allow(unsafe_code)]
 fn keep_freed_memory() {

@@ -3,7 +3,7 @@
 //! Everything here is used by both the simulator and the real robot, so it is the single
 //! source of truth for sim-to-real: the action table (paper Table 1), the observation
 //! layout, the normalisation of SPEC §2, and the seeded random number generator.
-//! No heavy dependencies: this crate builds in a second.
+//! No heavy dependencies: this crate builds quickly.
 
 pub mod action;
 pub mod npy;

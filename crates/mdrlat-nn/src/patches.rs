@@ -1,7 +1,7 @@
 //! The depth stream's first convolution as a matrix product.
 //!
 //! The first depth layer (16 filters of 4 x 10 x 14, stride 8, SAME padding) dominated the
-//! CPU training step as a direct convolution (~40% of the step on burn-flex). Its input is
+//! CPU training step as a direct convolution on burn-flex (`docs/performance.md`). Its input is
 //! data, never a parameter, so its patches ("im2col") can be cut on the host once per
 //! batch; the layer is then one matrix product with the convolution's own weight, which
 //! the backend's GEMM handles well, forward and backward. The weight keeps its

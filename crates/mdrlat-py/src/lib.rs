@@ -62,8 +62,8 @@ pub struct Env {
 /// An observation as a dict of numpy arrays, fresh ones (a single-env user may keep them):
 /// the stacks copied frame by frame into new vectors
 /// ([`mdrlat_core::FrameStack::to_stacked_vec`]), with plain stores (the arrays are read
-/// soon, and new memory is better not zeroed first: zeroing and then copying took 37 % of a
-/// one-env step on an AMD EPYC Zen 4 VM).
+/// soon, and new memory is better not zeroed first: zeroing and then copying took a large
+/// share of a one-env step; see `docs/performance.md`, *Python vector env speed*).
 fn observation_dict<'py>(py: Python<'py>, obs: &Observation) -> PyResult<Bound<'py, PyDict>> {
     let goal_len = if obs.goal.is_some() { GOAL_DIM } else { 0 };
     let (mut odom, mut goal) = (vec![0.0f32; 2 * ODOM_HISTORY], vec![0.0f32; goal_len]);
@@ -251,10 +251,9 @@ impl Env {
 /// `WINDOW_FRAMES − FRAME_STACK + 1` steps). 16 frames with plain stores beat 32 with
 /// non-temporal ones on both CPUs measured (a step writes ~5 frames of 82 KB for 4
 /// environments; 16-frame windows, 5.2 MB for 4, stay in the last-level cache, where
-/// plain stores also leave the frames for the caller to read): `VectorEnv` 4096-step
-/// loops on an AMD EPYC Zen 4 VM 83.5–88.4 → 80.0–81.9 µs a step, `speed.py` 0.81 →
-/// 0.83–0.84 of `bench sim`; on a Sapphire Rapids Xeon plain stores were the faster at
-/// every size from 8 to 32 frames (`docs/performance.md`, *Python vector-env speed*).
+/// plain stores also leave the frames for the caller to read); on a Sapphire Rapids Xeon plain
+/// stores were the faster at every size from 8 to 32 frames (figures in `docs/performance.md`,
+/// *Python vector env speed*).
 const WINDOW_FRAMES: usize = 16;
 
 /// The most environments (and threads) a vector env takes.
@@ -372,8 +371,9 @@ impl ObsArrays {
 /// observations of ended episodes (`final_*`, whole stacks); a step's `rewards`,
 /// `terminated` and `truncated`, `(N,)` each; and the observation dict of every
 /// window position (views of the windows). Made once instead of passed in with every step:
-/// extracting 13 numpy arguments and checking their borrows took ~1.5 µs a call, in the
-/// serial stretch between steps during which the worker threads wait.
+/// extracting 13 numpy arguments and checking their borrows every call was measurable, and it
+/// falls in the serial stretch between steps during which the worker threads wait
+/// (`docs/performance.md`, *Python vector env speed*).
 struct VecBuffers {
     now: ObsArrays,
     last: ObsArrays,

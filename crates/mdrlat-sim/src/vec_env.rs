@@ -7,8 +7,8 @@
 //! The environments are split into one contiguous chunk per thread. The calling thread
 //! steps chunk 0 itself; each other chunk belongs to a dedicated worker thread that waits
 //! for the next step by spinning briefly, then yielding, then parking. A general-purpose
-//! pool (rayon) puts its threads to sleep between steps, and waking a thread costs tens of
-//! microseconds on a virtual machine — as much as stepping an environment.
+//! pool (rayon) puts its threads to sleep between steps, and waking a thread on a virtual
+//! machine costs about as much as stepping an environment (`docs/performance.md`).
 
 use crate::config::SimConfig;
 use crate::env::{Env, Observation, SimError, StepInfo};

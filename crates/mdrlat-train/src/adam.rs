@@ -1,11 +1,11 @@
 //! Adam in one pass over memory.
 //!
-//! burn's `Adam` issues about a dozen element-wise tensor operations per parameter (scale the
-//! first moment, scale the gradient, add, square, …), each a full pass over the parameter and
-//! most a fresh allocation: for MDRLAT's 10.9 M parameters that is ~25 ms of a 100 ms step on
-//! two cores. [`FusedAdam`] does the same arithmetic, in the same order and in `f32`, in a single
-//! pass that reads the parameter, its gradient and both moments once and writes the parameter
-//! and the moments in place: seven streams of 44 MB instead of about thirty.
+//! burn's `Adam` issues about a dozen element-wise tensor operations per parameter (scale the first
+//! moment, scale the gradient, add, square, …), each a full pass over the parameter and most a
+//! fresh allocation: for MDRLAT's 10.9 M parameters that is a large share of a step on two cores
+//! (`docs/performance.md`). [`FusedAdam`] does the same arithmetic, in the same order and in `f32`,
+//! in a single pass that reads the parameter, its gradient and both moments once and writes the
+//! parameter and the moments in place: seven streams of 44 MB instead of about thirty.
 //!
 //! It writes in place only where that is safe and possible: on the CPU backends (`flex`, and
 //! LibTorch on the CPU), for contiguous `f32` tensors whose memory nothing else holds; on a
@@ -126,13 +126,12 @@ fn adam_pass(p: &mut [f32], g: &[f32], m: &mut [f32], v: &mut [f32], c: Coeffici
         .for_each(|(((p, g), m), v)| serial(p, g, m, v));
 }
 
-/// `x`, or 0 where it is subnormal. The moments of a weight whose gradient has vanished
-/// decay geometrically into the subnormal range (below 1.2e-38), where every further
-/// multiplication costs a microcode assist of ~100 cycles: in a real MDRLAT run that made
-/// the Adam pass ~3× slower (11 ms of a 62 ms step). Stored as 0 they cost nothing; the
-/// weight's step is the same (a subnormal moment's step is ~30 orders of magnitude below
-/// `f32` resolution), so the fused pass stays bit-identical to burn's Adam in the weights,
-/// and in the moments wherever burn's are normal numbers (tested).
+/// `x`, or 0 where it is subnormal. The moments of a weight whose gradient has vanished decay
+/// geometrically into the subnormal range (below 1.2e-38), where every further multiplication costs
+/// a microcode assist of ~100 cycles: in a real MDRLAT run that made the Adam pass much slower.
+/// Stored as 0 they cost nothing; the weight's step is the same (a subnormal moment's step is ~30
+/// orders of magnitude below `f32` resolution), so the fused pass stays bit-identical to burn's
+/// Adam in the weights, and in the moments wherever burn's are normal numbers (tested).
 #[inline(always)]
 fn flush_subnormal(x: f32) -> f32 {
     if x.abs() < f32::MIN_POSITIVE { 0.0 } else { x }
@@ -229,12 +228,12 @@ mod libtorch {
     }
 
     /// One Adam step in place on a LibTorch device (a GPU: the CPU's tensors go through
-    /// [`adam_pass`](super::adam_pass)), in LibTorch's element-wise kernels and in burn's
-    /// order of operations, so with burn's values. burn's `Adam` made the same ~13 kernel
-    /// launches a parameter through its own tensor layer, with a fresh tensor for each
-    /// (4.9 ms of an MDRLAT step on an H200, 2026-12-04). `false`, touching nothing, unless
-    /// all four are `f32` on one device with the same shape and the parameter and moments
-    /// are not shared (`can_mut`).
+    /// [`adam_pass`](super::adam_pass)), in LibTorch's element-wise kernels and in burn's order of
+    /// operations, so with burn's values. burn's `Adam` made the same ~13 kernel launches a
+    /// parameter through its own tensor layer, with a fresh tensor for each (a noticeable share of
+    /// an MDRLAT step on a GPU; `docs/backends.md`). `false`, touching nothing, unless all four are
+    /// `f32` on one device with the same shape and the parameter and moments are not shared
+    /// (`can_mut`).
     pub(super) fn device_step(
         p: &mut TchTensor,
         g: &TchTensor,

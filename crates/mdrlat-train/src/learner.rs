@@ -119,8 +119,9 @@ pub struct Learner {
     /// See [`Learner::phase_times`].
     phase_ms: [f64; 3],
     /// Independent forwards run on two threads: on burn's `flex` CPU backend each leaves a
-    /// core idle in its single-threaded stretches (MDRLAT step 130 → 110 ms on 2 cores);
-    /// LibTorch already spreads every kernel over all cores and only oversubscribes.
+    /// core idle in its single-threaded stretches (a measurably shorter MDRLAT step on 2
+    /// cores; `docs/performance.md`); LibTorch already spreads every kernel over all cores
+    /// and only oversubscribes.
     side_by_side: bool,
     /// Gradient steps on the host kernels where the backend allows (see
     /// [`Learner::uses_host_kernels`]).
@@ -823,11 +824,10 @@ impl Learner {
         let (next, now) = (batch_inputs(batch, true), batch_inputs(batch, false));
         // The online pass over s (kept for the backward pass) and over s' stacked into one
         // 64-row pass, which reads the online weights once for both, beside the target pass
-        // over s' (eq. 10). Same bytes as three 32-row passes side by side. On an Intel Xeon
-        // on 2026-12-03, with the row-panel forward kernel (`gemm_short_by_long`), 3000-step
-        // MDRLAT runs took 82.4–85.9 s stacked against 86.4–89.6 s with three passes (and
-        // 87.2–90.2 s before that kernel); with the earlier kernel stacking had lost (91.0–91.7
-        // against 88.0–91.6 s).
+        // over s' (eq. 10). Same bytes as three 32-row passes side by side. With the
+        // row-panel forward kernel (`gemm_short_by_long`) real MDRLAT runs were faster
+        // stacked than with three passes (and faster than before that kernel); with the
+        // earlier kernel stacking had lost (side-by-side runs: `docs/performance.md`).
         let (tape, target_next) = rayon::join(
             || online.forward_parts(&[now, next], if aux { b } else { 0 }),
             || target.q_values(&next),

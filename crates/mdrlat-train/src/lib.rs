@@ -37,10 +37,10 @@ pub use train::{Status, TrainReport, train};
 /// Readies the process for work on `device`. On a LibTorch GPU, LibTorch's CPU thread pool
 /// shrinks to one thread: with one thread a core it took the cores from rayon's threads
 /// (which sample batches and step environments) after every step's small host-side copies.
-/// On an H200 machine (16 cores), 2,500-step MDRLAT runs took 41 s with LibTorch's default
-/// pool and 29 s with one thread (`OMP_NUM_THREADS=1`): a batch's sampling 4.9 → 0.9 ms, a
-/// gradient step 17.7 → 15.2 ms (2026-12-04). Elsewhere it does nothing: on LibTorch's CPU
-/// those threads do the work.
+/// On a GPU machine, MDRLAT runs with one thread (`OMP_NUM_THREADS=1`) were clearly faster
+/// than with LibTorch's default pool, in both a batch's sampling and a gradient step
+/// (`docs/backends.md`, *A GPU lease*). Elsewhere it does nothing: on LibTorch's CPU those
+/// threads do the work.
 pub fn prepare_device(device: &mdrlat_nn::burn::prelude::Device) {
     #[cfg(feature = "tch")]
     if mdrlat_nn::is_libtorch_gpu(device) {

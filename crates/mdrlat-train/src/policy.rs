@@ -237,8 +237,8 @@ impl GreedyPolicy {
 
     /// Opt-in reduced precision for inference: the linear layers read their weights
     /// rounded to bfloat16 (half the bytes; products still summed in f32), which makes a
-    /// single decision — a pass over every weight, bound by memory — faster (MDRLAT on one
-    /// Sapphire Rapids core: 1.56 → 0.98 ms, side by side). Decisions can differ from the
+    /// single decision — a pass over every weight, bound by memory — faster (measured side
+    /// by side on one core: `docs/performance.md`). Decisions can differ from the
     /// f32 network's where two actions' Q-values are closer than the rounding; never the
     /// default.
     ///
@@ -308,7 +308,8 @@ impl GreedyPolicy {
 
     /// Whether a forward of `rows` rows runs on the calling thread rather than in the
     /// pool: one row, one thread, on the host kernels (see `HostNet::on_calling_thread`;
-    /// handing a decision to the pool's thread and waiting for it costs ~0.06 ms).
+    /// handing a decision to the pool's thread and waiting for it costs a measurable share
+    /// of a decision; `docs/performance.md`).
     fn on_calling_thread(&self, rows: usize) -> bool {
         rows == 1 && self.pool.current_num_threads() == 1 && self.host.is_some()
     }

@@ -1,6 +1,6 @@
 //! Evidence that it learns, not just runs: a laser-only agent trained for a few thousand
 //! steps in a small room beats the random policy's greedy-evaluation reward by a wide margin.
-//! (About a minute on 2 cores in release.)
+//! (It trains for real, so it takes a while; how fast training is, is the benches' business.)
 
 mod common;
 use common::train;

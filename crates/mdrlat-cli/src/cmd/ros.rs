@@ -139,9 +139,9 @@ pub struct Args {
     /// CPU threads for inference (1: one core, as measured for the robot).
     #[arg(long, default_value_t = 1)]
     pub threads: usize,
-    /// Opt-in: the network's linear layers read bfloat16 weights (half the memory traffic:
-    /// an MDRLAT decision 1.44 → 0.96 ms on a Sapphire Rapids core); decisions may differ
-    /// from f32 where two actions' Q-values nearly tie. Needs AVX-512.
+    /// Opt-in: the network's linear layers read bfloat16 weights (half the memory traffic,
+    /// so a faster decision: docs/performance.md); decisions may differ from f32 where two
+    /// actions' Q-values nearly tie. Needs AVX-512.
     #[arg(long)]
     pub bf16: bool,
 }
