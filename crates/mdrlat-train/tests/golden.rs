@@ -3,10 +3,13 @@
 //! sink and the collector (issue 40); they pin the bytes a user's run writes. If one changes,
 //! training itself changed: find out why before updating it.
 //!
-//! The bytes depend on the CPU kernels (the hand-written AVX-512 ones or the portable ones),
-//! so the hashes are those of the AVX-512 kernels, the ones every machine this project has
-//! landed on uses. Elsewhere the test says it skipped, and fails under
-//! `MDRLAT_REQUIRE_AVX512=1`.
+//! The bytes are one machine's: they depend on the CPU kernels (the hand-written AVX-512 ones
+//! or the portable ones) and, across machines, on how the `gemm` crate blocks its products
+//! (two VMs reporting the same Xeon model have written different models from one seed; see
+//! the README, *Reproducibility*). So the hashes are compared where they were recorded — a
+//! 2-vCPU Intel Xeon (Sapphire Rapids class) VM with AVX-512 — when `MDRLAT_GOLDEN=1` says
+//! this is such a machine; elsewhere the runs still run, their hashes are printed, and the
+//! test says it did not compare them.
 
 mod common;
 use common::train;
@@ -45,18 +48,24 @@ fn dir(name: &str) -> PathBuf {
     d
 }
 
-fn avx512_kernels() -> bool {
+/// Whether to compare the hashes: `MDRLAT_GOLDEN=1` says this machine is the kind they were
+/// recorded on, which must then run the AVX-512 kernels.
+fn compare_here() -> bool {
+    let asked = std::env::var_os("MDRLAT_GOLDEN").is_some_and(|v| v == "1");
+    if !asked {
+        eprintln!(
+            "SKIPPED the golden hashes' comparison (the runs ran): set MDRLAT_GOLDEN=1 on a \
+             machine of the kind they were recorded on"
+        );
+        return false;
+    }
     #[cfg(target_arch = "x86_64")]
     let cpu = std::arch::is_x86_feature_detected!("avx512f");
     #[cfg(not(target_arch = "x86_64"))]
     let cpu = false;
     let on = cpu && std::env::var_os("MDRLAT_PORTABLE_KERNELS").is_none_or(|v| v != "1");
-    if !on {
-        let required = std::env::var_os("MDRLAT_REQUIRE_AVX512").is_some_and(|v| v == "1");
-        assert!(!required, "MDRLAT_REQUIRE_AVX512=1, yet the AVX-512 kernels are off here");
-        eprintln!("SKIPPED golden runs: their hashes are those of the AVX-512 kernels");
-    }
-    on
+    assert!(on, "MDRLAT_GOLDEN=1, yet the AVX-512 kernels the hashes were recorded with are off");
+    true
 }
 
 const FILES: [&str; 8] = [
@@ -72,16 +81,16 @@ const FILES: [&str; 8] = [
 
 fn check(name: &str, got: &[(String, u64)], want: &[u64]) {
     let got_hashes: Vec<u64> = got.iter().map(|(_, h)| *h).collect();
-    assert_eq!(got_hashes, want, "{name}: golden run changed, now {got_hashes:?}: {got:?}");
+    eprintln!("{name}: {got_hashes:?}");
+    if compare_here() {
+        assert_eq!(got_hashes, want, "{name}: golden run changed, now {got_hashes:?}: {got:?}");
+    }
 }
 
 /// One environment in one world, the paper's loop: laser-only with the auxiliary task off
 /// (`optimizer-aux.bpk` absent), learning curves on.
 #[test]
 fn golden_single_environment_run() {
-    if !avx512_kernels() {
-        return;
-    }
     let d = dir("single");
     let config = TrainConfig {
         variant: Variant::LaserOnly,
@@ -118,9 +127,6 @@ const GOLDEN_SINGLE: [u64; 7] = [
 /// update, demonstrations and the auxiliary task (two Adams).
 #[test]
 fn golden_vector_run() {
-    if !avx512_kernels() {
-        return;
-    }
     let d = dir("vector");
     let config = TrainConfig {
         variant: Variant::MultiAt,
