@@ -104,7 +104,7 @@ fn in_place_steps(r: &EpisodeRecord) -> usize {
 /// alternately the successful episodes that drove farthest and those that turned on the
 /// spot most while still driving 3 m or more (successes first); ties go to the earlier
 /// episode.
-pub fn pick_episodes(worlds: &[WorldEval], k: usize) -> Vec<(usize, usize, Pick)> {
+pub fn pick_episodes(worlds: &[&WorldEval], k: usize) -> Vec<(usize, usize, Pick)> {
     let all: Vec<(usize, usize, &EpisodeRecord)> = worlds
         .iter()
         .enumerate()

@@ -191,9 +191,8 @@ pub fn evaluate(
     if out.figures > 0 {
         let dir = out.dir.join("figures");
         std::fs::create_dir_all(&dir).map_err(|e| io(&dir, e))?;
-        let owned: Vec<WorldEval> = evals.iter().map(|e| (*e).clone()).collect();
-        for (w, i, why) in pick_episodes(&owned, out.figures) {
-            let record = &owned[w].records[i];
+        for (w, i, why) in pick_episodes(&evals, out.figures) {
+            let record = &evals[w].records[i];
             let fig = draw_episode(&worlds[w], &eval_sim, record, why)?;
             let stem =
                 format!("{}-run{}-ep{}", file_stem(&record.world), record.run, record.episode);

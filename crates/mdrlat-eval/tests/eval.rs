@@ -203,7 +203,7 @@ fn figures_replay_the_picked_episodes() {
     let w = world("furnished");
     let settings = EvalSettings { max_steps: 80, ..small(2, 4) };
     let e = eval(&w, Scripted::Wander, &settings);
-    let picks = pick_episodes(std::slice::from_ref(&e), 3);
+    let picks = pick_episodes(&[&e], 3);
     assert_eq!(picks.len(), 3);
     let mut seen = std::collections::HashSet::new();
     for &(wi, i, why) in &picks {

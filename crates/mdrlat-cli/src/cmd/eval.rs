@@ -7,9 +7,7 @@ use crate::config::Config;
 use crate::progress;
 use anyhow::{Context, Result, bail};
 use mdrlat_core::Policy;
-use mdrlat_eval::{
-    Agent, EvalError, EvalObserver, EvalSettings, Output, Progress, WorldResult, prepare_output,
-};
+use mdrlat_eval::{Agent, EvalError, EvalObserver, EvalSettings, Output, Progress, WorldResult};
 use mdrlat_plan::MapSource;
 use mdrlat_sim::MovingRule;
 use mdrlat_sim::config::Task;
@@ -227,9 +225,6 @@ pub fn run(a: &Args) -> Result<()> {
         None => Agent::PerWorld(&mut planner),
     };
     let out = Output { dir: &a.out, overwrite: a.overwrite, figures: a.figures };
-    if let Err(e) = prepare_output(&a.out, a.overwrite) {
-        bail!("{e} (--overwrite)");
-    }
     let report = mdrlat_eval::evaluate(
         &worlds,
         &config.sim,
@@ -238,7 +233,14 @@ pub fn run(a: &Args) -> Result<()> {
         flop_per_decision,
         &out,
         &mut shown,
-    )?;
+    )
+    .map_err(|e| match e {
+        // The library checks the folder first; here its option is a flag.
+        EvalError::Output(m) if m.contains("already holds an evaluation") => {
+            anyhow::anyhow!("{m} (--overwrite)")
+        }
+        e => e.into(),
+    })?;
     shown.pb.finish_and_clear();
     if !a.json {
         let (names, written) = (report.policies.join(", "), report.written.join(", "));
