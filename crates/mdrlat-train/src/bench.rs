@@ -432,3 +432,56 @@ pub fn profile(
     out.push(("= gradient step".into(), step));
     out
 }
+
+/// A timing: median milliseconds and how many runs were timed, or why it could not be taken.
+pub type Timed = Result<(f64, usize), String>;
+
+/// What `mdrlat bench train` measures for one variant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VariantFigures {
+    /// The variant.
+    pub variant: Variant,
+    /// Median gradient step (host kernels on `flex`), ms, and how many were timed.
+    pub train: (f64, usize),
+    /// The same step through burn's autodiff, when asked for.
+    pub autodiff: Option<(f64, usize)>,
+    /// Median single decision on one core, ms, and how many were timed.
+    pub infer: (f64, usize),
+    /// One decision through the policy path in f32 and in bfloat16 (CPU only; bfloat16 needs
+    /// AVX-512), ms and samples, or why it could not be measured.
+    pub precision: Option<(Timed, Timed)>,
+    /// A batched decision of `observations` on all cores: ms and GFLOP/s.
+    pub batch: (f64, f64),
+    /// Replay memory for 20,000 transitions, MiB.
+    pub replay_mib: f64,
+}
+
+/// The settings of [`measure_variant`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BenchSettings {
+    /// Transitions per gradient step.
+    pub batch: usize,
+    /// Least time each measurement runs.
+    pub time: Duration,
+    /// Threads of the batched decision.
+    pub threads: usize,
+    /// Rows per forward of the batched decision.
+    pub forward_batch: usize,
+    /// Also time the gradient step through burn's autodiff.
+    pub compare_autodiff: bool,
+    /// Also time f32 against bfloat16 decisions (the CPU backend only).
+    pub precision: bool,
+}
+
+/// Every learner figure of `variant` on `device` (the rows of `mdrlat bench train`).
+pub fn measure_variant(variant: Variant, device: &Device, s: &BenchSettings) -> VariantFigures {
+    let train = update_ms(variant, s.batch, device, true, s.time);
+    let autodiff = s.compare_autodiff.then(|| update_ms(variant, s.batch, device, false, s.time));
+    let infer = infer_ms(variant, device, s.time, 1);
+    let precision = s
+        .precision
+        .then(|| (decision_ms(variant, false, s.time), decision_ms(variant, true, s.time)));
+    let batch = policy_batch_ms(variant, device, 64, Some(s.forward_batch), s.threads, s.time);
+    let replay_mib = replay_bytes(variant, 20_000) as f64 / (1024.0 * 1024.0);
+    VariantFigures { variant, train, autodiff, infer, precision, batch, replay_mib }
+}

@@ -6,8 +6,8 @@ use super::train::DeviceKind;
 use anyhow::Result;
 use mdrlat_nn::Variant;
 use mdrlat_train::bench::{
-    decision_ms, forward_stages_ms, gemm_reference_gflops, infer_ms, observation_inputs_ms,
-    policy_batch_ms, profile, replay_bytes, update_gflops, update_ms,
+    BenchSettings, forward_stages_ms, gemm_reference_gflops, measure_variant,
+    observation_inputs_ms, policy_batch_ms, profile, update_gflops,
 };
 use std::time::Duration;
 
@@ -60,6 +60,15 @@ pub fn run(a: &TrainArgs) -> Result<()> {
     // so far kept: the limit is what the machine can do, and on a shared VM a neighbour can
     // halve one measurement (seen on a Zen 4 VM: 106 GFLOP/s at the start of a run whose
     // other measurements gave 183–205, which read as an "efficiency" of 0.85).
+    let settings = BenchSettings {
+        batch: a.batch,
+        time,
+        threads,
+        forward_batch: EVAL_FORWARD_BATCH,
+        compare_autodiff: a.compare_autodiff,
+        // Opt-in bfloat16 weights, beside f32 through the same policy path (cpu only).
+        precision: a.device == DeviceKind::Cpu,
+    };
     let reference_time = time.min(Duration::from_secs(2));
     let mut reference = gemm_reference_gflops(2048, threads, reference_time);
     if a.json {
@@ -97,19 +106,10 @@ pub fn run(a: &TrainArgs) -> Result<()> {
             );
         }
         reference = reference.max(again);
-        let (train, n_train) = update_ms(v, a.batch, &device, true, time);
+        let f = measure_variant(v, &device, &settings);
+        let ((train, n_train), autodiff, (infer, n_infer)) = (f.train, f.autodiff, f.infer);
         let train_gflops = update_gflops(v, a.batch, train);
-        let autodiff = a.compare_autodiff.then(|| update_ms(v, a.batch, &device, false, time));
-        let (infer, n_infer) = infer_ms(v, &device, time, 1);
-        // Opt-in bfloat16 weights, beside f32 through the same policy path (cpu only).
-        let bf16 = (a.device == DeviceKind::Cpu).then(|| {
-            let f32_ms = decision_ms(v, false, time);
-            let bf16_ms = decision_ms(v, true, time);
-            (f32_ms, bf16_ms)
-        });
-        let replay = replay_bytes(v, 20_000) as f64 / (1024.0 * 1024.0);
-        let (batch_ms, batch_gflops) =
-            policy_batch_ms(v, &device, 64, Some(EVAL_FORWARD_BATCH), threads, time);
+        let (bf16, replay, (batch_ms, batch_gflops)) = (f.precision, f.replay_mib, f.batch);
         if a.json {
             out!(
                 "{}",
