@@ -76,6 +76,11 @@ impl TrainEnvs {
         Ok(TrainEnvs { scenes, sim: sim.clone(), slots })
     }
 
+    /// The simulator's settings every environment runs with.
+    pub fn sim(&self) -> &SimConfig {
+        &self.sim
+    }
+
     /// How many environments.
     pub fn len(&self) -> usize {
         self.slots.len()

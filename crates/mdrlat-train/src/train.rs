@@ -15,7 +15,7 @@ use crate::sink::{LOG_INTERVAL, MetricsSink};
 use crate::timing::{Clock, Timing};
 use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::config::Task;
-use mdrlat_sim::{SimConfig, VecEnv};
+use mdrlat_sim::VecEnv;
 use mdrlat_world::World;
 use std::time::Instant;
 
@@ -52,7 +52,7 @@ pub struct TrainReport {
 }
 
 /// Trains `config.variant` in `envs` (one environment per `train.envs`, freshly built: the
-/// run starts or restores every one of them) for
+/// run starts or restores every one of them; their simulator settings are the run's) for
 /// `config.total_steps` steps on `device`, into the run directory `dir`; with `resume`,
 /// continues exactly from its checkpoint. `progress` is called after every step. Fig. 4's
 /// evaluations and the learning curves' held-out starts are in the first world of `envs`.
@@ -62,7 +62,6 @@ pub struct TrainReport {
 /// cannot be written.
 pub fn train(
     mut envs: TrainEnvs,
-    sim: &SimConfig,
     config: &TrainConfig,
     device: &Device,
     dir: &RunDir,
@@ -74,6 +73,9 @@ pub fn train(
         let problem = format!("{}, but {} environments were given", config.envs, envs.len());
         return Err(TrainConfigError { field: "train.envs", problem }.into());
     }
+    // The simulator's settings are the environments' own: evaluations and the
+    // demonstrator use the same.
+    let sim = &envs.sim().clone();
     let (task, started) = (sim.task, Instant::now());
     let curve_worlds = curve_worlds(config, task, &envs.first_scene().world)?;
     // One environment per evaluation episode, the network deciding for all at once.

@@ -219,15 +219,8 @@ pub fn run(a: &Args) -> Result<()> {
             ));
         }
     };
-    let (report, learner) = mdrlat_train::train(
-        envs,
-        &config.sim,
-        &config.train,
-        &device.device(),
-        &dir,
-        resume,
-        on_step,
-    )?;
+    let (report, learner) =
+        mdrlat_train::train(envs, &config.train, &device.device(), &dir, resume, on_step)?;
     pb.finish_and_clear();
     dir.save_model(&learner, report.steps, config.train.model_precision)?;
     let last = report.evaluations.last().map(|e| {

@@ -18,5 +18,5 @@ pub fn train(
     progress: impl FnMut(&Status),
 ) -> Result<(TrainReport, Learner), TrainError> {
     let envs = TrainEnvs::new(worlds, sim, config.envs)?;
-    mdrlat_train::train(envs, sim, config, device, &RunDir::at(dir), resume, progress)
+    mdrlat_train::train(envs, config, device, &RunDir::at(dir), resume, progress)
 }
