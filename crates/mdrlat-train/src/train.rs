@@ -14,8 +14,8 @@ use crate::run_dir::RunDir;
 use crate::sink::{LOG_INTERVAL, MetricsSink};
 use crate::timing::{Clock, Timing};
 use mdrlat_nn::burn::prelude::Device;
-use mdrlat_sim::config::Task;
 use mdrlat_sim::VecEnv;
+use mdrlat_sim::config::Task;
 use mdrlat_world::World;
 use std::time::Instant;
 
