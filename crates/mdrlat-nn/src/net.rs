@@ -1,12 +1,12 @@
 //! The Q-network: two convolutional streams, optional bilinear fusion, a dueling head and an
 //! optional auxiliary velocity head.
 
-use crate::patches::PatchGeometry;
 use burn::nn::conv::{Conv1d, Conv1dConfig, Conv2d, Conv2dConfig};
 use burn::nn::{Linear, LinearConfig, PaddingConfig1d, PaddingConfig2d};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 use mdrlat_core::Variant;
+use mdrlat_kernels::ConvGeometry;
 
 /// Settings of a [`QNet`]. Defaults are the paper's input sizes.
 #[derive(Config, Debug)]
@@ -307,7 +307,7 @@ pub fn depth_input(
 
 /// The first convolution's SAME-padded patches of a batch of normalised
 /// `[B, frames, rows, cols]` depth stacks, as `[B, out_rows, out_cols, 560]`
-/// (`[B, 16, 20, 560]` at 128 x 160). See the `patches` module for why.
+/// (`[B, 16, 20, 560]` at 128 x 160). See `mdrlat_kernels::patches` for why.
 pub fn depth_patches(
     stacks: &[f32],
     batch: usize,
@@ -316,11 +316,17 @@ pub fn depth_patches(
     device: &Device,
 ) -> Tensor<4> {
     let frames = stacks.len() / (batch * rows * cols).max(1);
-    let g = PatchGeometry::depth_conv1(frames, rows, cols);
+    let g = depth_conv1_geometry(frames, rows, cols);
     let mut buf = Vec::new();
     g.extract(stacks, batch, &mut buf);
     let [oh, ow] = g.out();
     Tensor::from_data(TensorData::new(buf, [batch, oh, ow, g.patch_len()]), device)
+}
+
+/// The paper's first depth convolution (16 filters of `frames` × 10 × 14 at stride 8) on
+/// `[frames, rows, cols]` stacks.
+pub fn depth_conv1_geometry(frames: usize, rows: usize, cols: usize) -> ConvGeometry {
+    ConvGeometry { h: rows, w: cols, c: frames, kh: 10, kw: 14, stride: 8, out_channels: 16 }
 }
 
 /// The laser stream: three 1D convolutions.

@@ -11,122 +11,19 @@
 //! still burn's — [`HostNet`] only reads the weights of a [`QNet`] and returns gradients
 //! keyed by parameter id — so checkpoints, exports and every other backend are unchanged.
 
-pub(crate) mod conv;
-pub(crate) mod gemm;
-
 use crate::net::{QNet, QNetConfig};
-use crate::patches::PatchGeometry;
 use burn::backend::{BackendTensor, DispatchTensor, DispatchTensorKind};
 use burn::module::{Param, ParamId};
 use burn::prelude::*;
 use burn::tensor::DType;
-use conv::{ConvGeometry, column_sums, patch_product_backward, relu_backward, relu_in_place};
-use gemm::{Conv16, Mat, conv16, conv16_weight_grad, gemm_new, gemm_short_by_long, gemm_tall};
+use mdrlat_kernels::conv::{
+    self, ConvGeometry, column_sums, patch_product_backward, relu_backward, relu_in_place,
+};
+use mdrlat_kernels::gemm::{
+    self, Conv16, Mat, conv16, conv16_weight_grad, gemm_new, gemm_short_by_long, gemm_tall,
+};
+use mdrlat_kernels::{transpose_into, transposed};
 use rayon::prelude::*;
-
-/// A linear layer's three matrix products as the host kernels compute them, public for the
-/// criterion benches (`cargo bench -p mdrlat-nn`); not a stable interface.
-#[doc(hidden)]
-pub mod products {
-    use super::gemm::{Mat, gemm, gemm_short_by_long, gemm_tall};
-
-    /// The forward product `y += x · W` (`x` `[batch, din]`, `W` `[din, dout]`).
-    pub fn forward(batch: usize, din: usize, dout: usize, x: &[f32], w: &[f32], y: &mut [f32]) {
-        gemm_short_by_long(batch, dout, din, x, w, y, true);
-    }
-
-    /// The same product through the `gemm` crate (the library of `bench train`'s reference).
-    pub fn forward_gemm_crate(
-        batch: usize,
-        din: usize,
-        dout: usize,
-        x: &[f32],
-        w: &[f32],
-        y: &mut [f32],
-    ) {
-        gemm(batch, dout, din, Mat::n(x), Mat::n(w), y, true);
-    }
-
-    /// The weight gradient `xᵀ · dy` (`[din, dout]`).
-    pub fn weight_gradient(
-        batch: usize,
-        din: usize,
-        dout: usize,
-        x: &[f32],
-        dy: &[f32],
-    ) -> Vec<f32> {
-        gemm_tall(din, dout, batch, Mat::t(x), Mat::n(dy))
-    }
-
-    /// The input gradient, transposed: `W · dyᵀ` (`[din, batch]`).
-    pub fn input_gradient_t(
-        batch: usize,
-        din: usize,
-        dout: usize,
-        w: &[f32],
-        dy: &[f32],
-    ) -> Vec<f32> {
-        gemm_tall(din, batch, dout, Mat::n(w), Mat::t(dy))
-    }
-
-    /// The paper's first depth convolution (16 filters of 4 × 10 × 14 at stride 8 on
-    /// 4 × 128 × 160 stacks) as the learner runs it on one image: straight from the
-    /// zero-padded image ([`first_conv_image_len`] floats), into `out` (`[320, 16]`, added
-    /// to), with `wt` the weight transposed (`[560, 16]`). `false` where the CPU lacks
-    /// AVX-512.
-    pub fn first_conv(image: &[f32], wt: &[f32], out: &mut [f32]) -> bool {
-        super::gemm::conv16(&first_conv_geometry(), image, wt, out, &[])
-    }
-
-    /// Its weight gradient, added into `dwt` (`[560, 16]`) from `dy` (`[320, 16]`).
-    pub fn first_conv_weight_grad(image: &[f32], dy: &[f32], dwt: &mut [f32]) -> bool {
-        super::gemm::conv16_weight_grad(&first_conv_geometry(), image, dy, dwt, &[])
-    }
-
-    /// Floats of the first convolution's zero-padded image.
-    pub fn first_conv_image_len() -> usize {
-        let g = first_conv_geometry();
-        g.channels * g.rows * g.cols
-    }
-
-    /// Its FLOPs on one image (forward, and so its weight gradient).
-    pub fn first_conv_flop() -> usize {
-        let g = first_conv_geometry();
-        2 * g.out_rows * g.out_cols * g.channels * g.kh * g.kw * 16
-    }
-
-    /// The geometry the learner derives for the paper's stacks.
-    fn first_conv_geometry() -> super::gemm::Conv16 {
-        use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, FRAME_STACK};
-        let patches =
-            crate::patches::PatchGeometry::depth_conv1(FRAME_STACK, DEPTH_ROWS, DEPTH_COLS);
-        super::HostNet::conv1_direct(&patches)
-    }
-
-    /// A later convolution + ReLU as the learner runs it on `batch` channel-last images
-    /// (`[B, h, w, c]`), patches cut into `cols`; `w` is `[out, kh, kw, c]` (the patches'
-    /// order) and `wt` the same transposed ([`transposed`]). `geometry` is `[h, w, c, kh,
-    /// kw, stride, out]`.
-    #[allow(clippy::too_many_arguments)]
-    pub fn conv_relu(
-        geometry: [usize; 7],
-        x: &[f32],
-        batch: usize,
-        w: &[f32],
-        wt: &[f32],
-        bias: &[f32],
-        cols: &mut Vec<f32>,
-    ) -> Vec<f32> {
-        let [h, w_, c, kh, kw, stride, out_channels] = geometry;
-        let g = super::conv::ConvGeometry { h, w: w_, c, kh, kw, stride, out_channels };
-        super::conv::conv_relu(&g, x, batch, (w, wt), bias, cols)
-    }
-
-    /// `w` (`[rows, len / rows]`) transposed.
-    pub fn transposed(w: &[f32], rows: usize) -> Vec<f32> {
-        super::transposed(w, rows)
-    }
-}
 
 /// Width of the heads' hidden layers, and the bilinear fusion's `L_d`, `L_l`.
 use crate::net::{FUSION_DEPTH as FUSION_D, FUSION_LASER as FUSION_L, HIDDEN};
@@ -253,34 +150,6 @@ impl HostLinear {
         grads.push(HostGrad::of(&self.weight, dw));
         grads.push(HostGrad::of(&self.bias, column_sums(dy, dout)));
     }
-}
-
-/// `dx` (`[batch, din]`) = (or `+=` where `accumulate`) the transpose of `dxt` (`[din,
-/// batch]`), a block of 16 columns of `dx` at a time: each row's 16 values are written
-/// together. Column by column, the rows of a batch lie `din` floats apart; for the fusion's
-/// and the heads' widths (8192, 4096, 2560) they fall in one or two sets of L1 and evict
-/// each other between columns: that loop stood out in the profile of an MDRLAT step.
-fn transpose_into(dxt: &[f32], din: usize, batch: usize, dx: &mut [f32], accumulate: bool) {
-    const BLOCK: usize = 16;
-    assert!(dxt.len() >= din * batch && dx.len() >= din * batch, "transpose_into: sizes");
-    for j0 in (0..din).step_by(BLOCK) {
-        let cols = BLOCK.min(din - j0);
-        let src = &dxt[j0 * batch..(j0 + cols) * batch];
-        for r in 0..batch {
-            let row = &mut dx[r * din + j0..r * din + j0 + cols];
-            for (c, d) in row.iter_mut().enumerate() {
-                let v = src[c * batch + r];
-                *d = if accumulate { *d + v } else { v };
-            }
-        }
-    }
-}
-
-/// `w` (`[rows, len / rows]`) transposed, as a new matrix.
-fn transposed(w: &[f32], rows: usize) -> Vec<f32> {
-    let mut wt = vec![0.0; w.len()];
-    transpose_into(w, rows, w.len() / rows.max(1), &mut wt, false);
-    wt
 }
 
 /// A convolution's weight (`[out, in, kh, kw]` or `[out, in, k]`) and bias.
@@ -743,18 +612,18 @@ impl HostNet {
     /// one register), else from its patches cut into a buffer that stays in the core's
     /// cache, `P · Wᵀ + b` by the short-by-long product.
     fn depth_conv1(&self, c1: &HostConv, images: &[&[f32]]) -> Vec<f32> {
-        let g = Self::conv1_geometry(c1);
+        let g = c1.geometry;
         let (positions, filters, k) = (g.positions(), c1.geometry.out_channels, g.patch_len());
         // Wᵀ, [560, 16]: each patch value's weight for the 16 filters, one vector.
         let (wt, bias) = (c1.transposed_weight(), c1.bias.data());
         let mut out = bias.repeat(images.len() * positions);
         // Straight from each zero-padded image where the CPU has AVX-512 and there are 16
         // filters; else from its patches.
-        let direct = Self::conv1_direct(&g);
+        let direct = Conv16::padded(&g);
         let one = |(padded, patches): &mut (Vec<f32>, Vec<f32>), (i, out): (usize, &mut [f32])| {
             let (image, next) = with_next(images, i);
             let done = filters == 16
-                && Self::pad_conv1_image(&g, &direct, image, padded)
+                && direct.pad(&g, image, padded)
                 && conv16(&direct, padded, wt, out, next);
             if !done {
                 g.extract(image, 1, patches);
@@ -777,50 +646,6 @@ impl HostNet {
         out
     }
 
-    /// The first depth layer as a [`Conv16`] over its image zero-padded on every side.
-    fn conv1_direct(g: &PatchGeometry) -> Conv16 {
-        let [oh, ow] = g.out();
-        let [kh, kw] = g.kernel;
-        Conv16 {
-            channels: g.channels,
-            rows: (oh - 1) * g.stride + kh,
-            cols: (ow - 1) * g.stride + kw,
-            kh,
-            kw,
-            stride: g.stride,
-            out_rows: oh,
-            out_cols: ow,
-        }
-    }
-
-    /// `image` zero-padded into `padded` as `direct` reads it; `false` where the padding
-    /// does not take that form (the caller cuts patches instead).
-    fn pad_conv1_image(
-        g: &PatchGeometry,
-        direct: &Conv16,
-        image: &[f32],
-        padded: &mut Vec<f32>,
-    ) -> bool {
-        let [pt, pl] = g.pad_before();
-        let (h, w) = (g.rows, g.cols);
-        if pt + h > direct.rows || pl + w > direct.cols {
-            return false;
-        }
-        // The border stays zero from the buffer's first use: only the interior is written.
-        let len = direct.channels * direct.rows * direct.cols;
-        if padded.len() != len {
-            padded.clear();
-            padded.resize(len, 0.0);
-        }
-        for (ch, plane) in image.chunks_exact(h * w).enumerate() {
-            for (iy, src) in plane.chunks_exact(w).enumerate() {
-                let at = (ch * direct.rows + pt + iy) * direct.cols + pl;
-                padded[at..at + w].copy_from_slice(src);
-            }
-        }
-        true
-    }
-
     /// The first depth layer's weight gradient `Σ_images dyᵀ · P`, summed in image order,
     /// and its bias gradient: with AVX-512 and 16 filters straight from each zero-padded
     /// image ([`conv16_weight_grad`]), else from its patches cut again, one image at a time
@@ -831,9 +656,9 @@ impl HostNet {
         images: &[&[f32]],
         dy: &[f32],
     ) -> (Vec<f32>, Vec<f32>) {
-        let g = Self::conv1_geometry(c1);
+        let g = c1.geometry;
         let (positions, filters, k) = (g.positions(), c1.geometry.out_channels, g.patch_len());
-        let direct = Self::conv1_direct(&g);
+        let direct = Conv16::padded(&g);
         // Each image's share, `[560 × 16]` (transposed) when computed directly, else
         // `[16 × 560]`.
         let partial: Vec<(Vec<f32>, bool)> = dy
@@ -845,7 +670,7 @@ impl HostNet {
                     let (image, next) = with_next(images, i);
                     let mut dwt = vec![0.0; filters * k];
                     if filters == 16
-                        && Self::pad_conv1_image(&g, &direct, image, padded)
+                        && direct.pad(&g, image, padded)
                         && conv16_weight_grad(&direct, padded, dy, &mut dwt, next)
                     {
                         return (dwt, true);
@@ -868,18 +693,6 @@ impl HostNet {
             transpose_into(&dwt, k, filters, &mut dw, false);
         }
         (dw, column_sums(dy, filters))
-    }
-
-    /// The first depth layer's patch geometry.
-    fn conv1_geometry(c1: &HostConv) -> PatchGeometry {
-        let g = c1.geometry;
-        PatchGeometry {
-            channels: g.c,
-            rows: g.h,
-            cols: g.w,
-            kernel: [g.kh, g.kw],
-            stride: g.stride,
-        }
     }
 
     /// The laser stream on the stacked `parts`: each layer's patches and (channel-last)

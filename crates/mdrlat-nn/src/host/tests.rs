@@ -185,24 +185,6 @@ fn bf16_weights_give_nearly_the_f32_q_values() {
     }
 }
 
-/// The blocked transpose of the input gradients against the definition, with a tail block,
-/// written and accumulated.
-#[test]
-fn transpose_into_matches_the_definition() {
-    for (din, batch) in [(1, 1), (16, 3), (37, 32), (100, 5)] {
-        let dxt: Vec<f32> = (0..din * batch).map(|v| v as f32 * 0.5 - 3.0).collect();
-        let want: Vec<f32> = (0..batch * din).map(|i| dxt[(i % din) * batch + i / din]).collect();
-        let mut dx = vec![f32::NAN; batch * din];
-        transpose_into(&dxt, din, batch, &mut dx, false);
-        assert_eq!(dx, want, "{din}x{batch}");
-        let base: Vec<f32> = (0..batch * din).map(|i| (i % 7) as f32).collect();
-        let mut dx = base.clone();
-        transpose_into(&dxt, din, batch, &mut dx, true);
-        let sum: Vec<f32> = want.iter().zip(&base).map(|(w, b)| b + w).collect();
-        assert_eq!(dx, sum, "{din}x{batch} accumulated");
-    }
-}
-
 /// A single decision from the advantage head alone is the Q-values' greedy action whenever
 /// it is offered, for every variant (and a goal input), and it is offered for most inputs;
 /// otherwise the Q-values are those of the whole forward, bit for bit (also with a bound

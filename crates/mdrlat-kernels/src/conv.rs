@@ -3,46 +3,54 @@
 //! `[out, in, kh, kw]` permuted to `[out, kh, kw, in]` to match. A 1D convolution is the
 //! `H = 1` case.
 
-use super::gemm::{Mat, gemm, gemm_tall};
+use crate::gemm::{Mat, gemm, gemm_tall};
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 
-/// Geometry of one convolution layer.
+/// Geometry of one SAME-padded convolution layer (TensorFlow's and burn's `Same`): the one
+/// description of a convolution here, whether its images are channel-last ([`im2col`],
+/// [`conv_relu`]) or channel-first ([`ConvGeometry::extract`]), and what the direct kernel's
+/// [`crate::gemm::Conv16`] is derived from. A 1D convolution has `h = 1`, `kh = 1`.
+///
+/// [`im2col`]: ConvGeometry::im2col
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct ConvGeometry {
-    /// Input rows, columns and channels.
-    pub(crate) h: usize,
-    pub(crate) w: usize,
-    pub(crate) c: usize,
-    /// Kernel rows and columns.
-    pub(crate) kh: usize,
-    pub(crate) kw: usize,
+pub struct ConvGeometry {
+    /// Input rows.
+    pub h: usize,
+    /// Input columns.
+    pub w: usize,
+    /// Input channels.
+    pub c: usize,
+    /// Kernel rows.
+    pub kh: usize,
+    /// Kernel columns.
+    pub kw: usize,
     /// Stride (both axes).
-    pub(crate) stride: usize,
-    /// Output channels.
-    pub(crate) out_channels: usize,
+    pub stride: usize,
+    /// Output channels (filters).
+    pub out_channels: usize,
 }
 
 impl ConvGeometry {
     /// Output rows and columns (TensorFlow SAME: `ceil(in / stride)`).
-    pub(crate) fn out(&self) -> [usize; 2] {
+    pub fn out(&self) -> [usize; 2] {
         [self.h.div_ceil(self.stride), self.w.div_ceil(self.stride)]
     }
 
     /// Output positions per image.
-    pub(crate) fn positions(&self) -> usize {
+    pub fn positions(&self) -> usize {
         let [oh, ow] = self.out();
         oh * ow
     }
 
     /// Values per patch.
-    pub(crate) fn patch_len(&self) -> usize {
+    pub fn patch_len(&self) -> usize {
         self.kh * self.kw * self.c
     }
 
     /// Padding before the first row and column (the odd pixel goes after, as in TensorFlow
     /// and burn's `Same`).
-    fn pad_before(&self) -> [usize; 2] {
+    pub fn pad_before(&self) -> [usize; 2] {
         let [oh, ow] = self.out();
         let total =
             |out: usize, k: usize, len: usize| ((out - 1) * self.stride + k).saturating_sub(len);
@@ -64,7 +72,7 @@ impl ConvGeometry {
     /// padding reads 0. Every value is written once: the padding's zeros beside the copied
     /// spans, not a zeroed buffer first (a whole extra pass over a buffer of megabytes, which
     /// had taken longer than the copy itself in a training step).
-    pub(crate) fn im2col(&self, x: &[f32], batch: usize, cols: &mut Vec<f32>) {
+    pub fn im2col(&self, x: &[f32], batch: usize, cols: &mut Vec<f32>) {
         let (k, image) = (self.patch_len(), self.h * self.w * self.c);
         // Checked in release too: the `set_len` below relies on every value being written.
         assert_eq!(x.len(), batch * image, "im2col: {batch} images of {image} values");
@@ -101,7 +109,7 @@ impl ConvGeometry {
             debug_assert_eq!(cols.len(), oh * ow * k);
         };
         let spare = &mut cols.spare_capacity_mut()[..len];
-        if batch == 1 || !super::gemm::may_split() {
+        if batch == 1 || !crate::gemm::may_split() {
             spare.chunks_mut(self.positions() * k).zip(x.chunks(image)).for_each(fill);
         } else {
             spare.par_chunks_mut(self.positions() * k).zip(x.par_chunks(image)).for_each(fill);
@@ -122,7 +130,7 @@ impl ConvGeometry {
 
     /// The adjoint of [`ConvGeometry::im2col`]: adds each patch value back onto the input
     /// position it was read from. `dx` is overwritten, `[B, H, W, C]`.
-    pub(crate) fn col2im(&self, dcols: &[f32], batch: usize, dx: &mut Vec<f32>) {
+    pub fn col2im(&self, dcols: &[f32], batch: usize, dx: &mut Vec<f32>) {
         let (k, image) = (self.patch_len(), self.h * self.w * self.c);
         dx.clear();
         dx.resize(batch * image, 0.0);
@@ -156,7 +164,7 @@ impl ConvGeometry {
     }
 
     /// A convolution weight `[out, in, kh, kw]` as `[out, kh, kw, in]`, the patches' order.
-    pub(crate) fn permute_weight(&self, w: &[f32]) -> Vec<f32> {
+    pub fn permute_weight(&self, w: &[f32]) -> Vec<f32> {
         let (c, kk) = (self.c, self.kh * self.kw);
         let mut out = vec![0.0; w.len()];
         for o in 0..self.out_channels {
@@ -170,7 +178,7 @@ impl ConvGeometry {
     }
 
     /// The inverse of [`ConvGeometry::permute_weight`] (for weight gradients).
-    pub(crate) fn unpermute_weight(&self, wp: &[f32]) -> Vec<f32> {
+    pub fn unpermute_weight(&self, wp: &[f32]) -> Vec<f32> {
         let (c, kk) = (self.c, self.kh * self.kw);
         let mut out = vec![0.0; wp.len()];
         for o in 0..self.out_channels {
@@ -187,7 +195,7 @@ impl ConvGeometry {
 /// A convolution + ReLU on `batch` channel-last images `x`: their patches cut into `cols`
 /// (kept: the backward pass reads them), then [`patch_product_relu`] with the weight in the
 /// patches' order and transposed (`(w, wt)`).
-pub(crate) fn conv_relu(
+pub fn conv_relu(
     g: &ConvGeometry,
     x: &[f32],
     batch: usize,
@@ -203,7 +211,7 @@ pub(crate) fn conv_relu(
 /// `w` (`[out, k]`), given also transposed (`wt`, `[k, out]`: what a batch's product reads,
 /// kept by the caller instead of gathered at every call, a measurable share of the second
 /// depth convolution's forward).
-pub(crate) fn patch_product_relu(
+pub fn patch_product_relu(
     cols: &[f32],
     w: &[f32],
     wt: &[f32],
@@ -233,7 +241,7 @@ pub(crate) fn patch_product_relu(
 /// Gradients of a patch product (see [`patch_product_relu`]) from `dy` (`[rows, out]`,
 /// already through the ReLU): the weight's `[out, k]` and the bias's, and with `dcols` the
 /// patches' (`[rows, k]`).
-pub(crate) fn patch_product_backward(
+pub fn patch_product_backward(
     cols: &[f32],
     w: &[f32],
     dy: &[f32],
@@ -254,7 +262,7 @@ pub(crate) fn patch_product_backward(
 }
 
 /// Sums of the columns of a row-major matrix with `cols` columns.
-pub(crate) fn column_sums(m: &[f32], cols: usize) -> Vec<f32> {
+pub fn column_sums(m: &[f32], cols: usize) -> Vec<f32> {
     let mut s = vec![0.0f32; cols];
     for row in m.chunks_exact(cols.max(1)) {
         for (s, v) in s.iter_mut().zip(row) {
@@ -265,14 +273,14 @@ pub(crate) fn column_sums(m: &[f32], cols: usize) -> Vec<f32> {
 }
 
 /// `max(x, 0)` in place.
-pub(crate) fn relu_in_place(x: &mut [f32]) {
+pub fn relu_in_place(x: &mut [f32]) {
     for v in x {
         *v = v.max(0.0);
     }
 }
 
 /// Zeroes the gradient where the ReLU's output was 0 (the ReLU passed nothing back).
-pub(crate) fn relu_backward(dy: &mut [f32], y: &[f32]) {
+pub fn relu_backward(dy: &mut [f32], y: &[f32]) {
     for (d, &y) in dy.iter_mut().zip(y) {
         if y <= 0.0 {
             *d = 0.0;
@@ -348,7 +356,7 @@ mod tests {
         let (k, out) = (37, 21);
         let w: Vec<f32> = (0..out * k).map(|v| ((v * 5) % 11) as f32 * 0.1 - 0.5).collect();
         let mut wt = vec![0.0; w.len()];
-        crate::host::transpose_into(&w, out, k, &mut wt, false);
+        crate::transpose_into(&w, out, k, &mut wt, false);
         let bias: Vec<f32> = (0..out).map(|o| o as f32 * 0.05 - 0.4).collect();
         for rows in [10, 1100] {
             let cols: Vec<f32> = (0..rows * k).map(|v| ((v * 3) % 7) as f32 * 0.25 - 0.7).collect();

@@ -1,63 +1,21 @@
-//! The depth stream's first convolution as a matrix product.
+//! Patches of channel-first images (`[B, C, H, W]`, the depth stacks as they come), ordered
+//! channel, kernel row, kernel column like a `[out, C, kh, kw]` convolution weight.
 //!
 //! The first depth layer (16 filters of 4 x 10 x 14, stride 8, SAME padding) dominated the
 //! CPU training step as a direct convolution on burn-flex (`docs/performance.md`). Its input is
 //! data, never a parameter, so its patches ("im2col") can be cut on the host once per
 //! batch; the layer is then one matrix product with the convolution's own weight, which
-//! the backend's GEMM handles well, forward and backward. The weight keeps its
+//! any backend's GEMM handles well, forward and backward. The weight keeps its
 //! `[16, 4, 10, 14]` convolution layout, so exported weights are a plain `Conv2d`.
 
+use crate::conv::ConvGeometry;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 
-/// Geometry of a SAME-padded 2D convolution's patches.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct PatchGeometry {
-    /// Input channels (stacked frames).
-    pub channels: usize,
-    /// Input rows and columns.
-    pub rows: usize,
-    /// Input columns.
-    pub cols: usize,
-    /// Kernel rows and columns.
-    pub kernel: [usize; 2],
-    /// Stride (both axes).
-    pub stride: usize,
-}
-
-impl PatchGeometry {
-    /// The paper's first depth convolution on `[frames, rows, cols]` stacks.
-    pub fn depth_conv1(frames: usize, rows: usize, cols: usize) -> Self {
-        Self { channels: frames, rows, cols, kernel: [10, 14], stride: 8 }
-    }
-
-    /// Output rows and columns (TensorFlow SAME: `ceil(in / stride)`).
-    pub fn out(&self) -> [usize; 2] {
-        [self.rows.div_ceil(self.stride), self.cols.div_ceil(self.stride)]
-    }
-
-    /// Patch positions per image (`out_rows · out_cols`).
-    pub fn positions(&self) -> usize {
-        let [r, c] = self.out();
-        r * c
-    }
-
-    /// Values per patch (`channels · kh · kw`), ordered channel, kernel row, kernel column
-    /// like the convolution weight.
-    pub fn patch_len(&self) -> usize {
-        self.channels * self.kernel[0] * self.kernel[1]
-    }
-
-    /// Padding before the first row and column (TensorFlow puts the odd pixel after).
-    pub fn pad_before(&self) -> [usize; 2] {
-        let [or, oc] = self.out();
-        let total =
-            |out: usize, k: usize, len: usize| ((out - 1) * self.stride + k).saturating_sub(len);
-        [total(or, self.kernel[0], self.rows) / 2, total(oc, self.kernel[1], self.cols) / 2]
-    }
-
-    /// Cuts the patches of `batch` images (`[B, channels, rows, cols]`, row-major) into
-    /// `out` as `[B, positions, patch_len]`; padding reads 0.
+impl ConvGeometry {
+    /// Cuts the patches of `batch` channel-first images (`[B, c, h, w]`, row-major) into
+    /// `out` as `[B, positions, patch_len]`, each patch ordered channel, kernel row, kernel
+    /// column; padding reads 0.
     ///
     /// # Panics
     /// If `images` does not hold `batch` images.
@@ -66,14 +24,14 @@ impl PatchGeometry {
         self.extract_append(images, batch, out);
     }
 
-    /// [`PatchGeometry::extract`], appending to `out`: each value is written once (no
+    /// [`ConvGeometry::extract`], appending to `out`: each value is written once (no
     /// zeroing pass over the 23 MB of a batch of 32 first), one image per work item.
     ///
     /// # Panics
     /// If `images` does not hold `batch` images.
     #[allow(unsafe_code)]
     pub fn extract_append(&self, images: &[f32], batch: usize, out: &mut Vec<f32>) {
-        let (c, h, w) = (self.channels, self.rows, self.cols);
+        let (c, h, w) = (self.c, self.h, self.w);
         assert_eq!(images.len(), batch * c * h * w, "patch input size");
         let per_image = self.positions() * self.patch_len();
         if per_image == 0 || batch == 0 {
@@ -101,9 +59,9 @@ impl PatchGeometry {
     /// The patches of one `[channels, rows, cols]` image into `out` (one image's worth):
     /// every value is written, padding as 0.
     fn extract_one(&self, image: &[f32], out: &mut [MaybeUninit<f32>]) {
-        let (c, h, w) = (self.channels, self.rows, self.cols);
+        let (c, h, w) = (self.c, self.h, self.w);
         let [or, oc] = self.out();
-        let [kh, kw] = self.kernel;
+        let (kh, kw) = (self.kh, self.kw);
         let [pt, pl] = self.pad_before();
         let (patch, kernel_plane) = (self.patch_len(), kh * kw);
         debug_assert_eq!(out.len(), or * oc * patch);
@@ -178,7 +136,7 @@ mod tests {
     #[test]
     fn patches_follow_tensorflow_same_padding() {
         // 1 channel, 5 x 5, kernel 3 x 3, stride 2: out 3 x 3; total pad 2 → 1 before.
-        let g = PatchGeometry { channels: 1, rows: 5, cols: 5, kernel: [3, 3], stride: 2 };
+        let g = ConvGeometry { h: 5, w: 5, c: 1, kh: 3, kw: 3, stride: 2, out_channels: 1 };
         assert_eq!(g.out(), [3, 3]);
         let img: Vec<f32> = (0..25).map(|v| v as f32).collect();
         let mut out = Vec::new();
@@ -188,7 +146,8 @@ mod tests {
         assert_eq!(&out[0..9], &[0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 5.0, 6.0]);
         // Centre patch (position 4) is centred on pixel (2, 2) = 12.
         assert_eq!(&out[4 * 9..5 * 9], &[6.0, 7.0, 8.0, 11.0, 12.0, 13.0, 16.0, 17.0, 18.0]);
-        let paper = PatchGeometry::depth_conv1(4, 128, 160);
+        let paper =
+            ConvGeometry { h: 128, w: 160, c: 4, kh: 10, kw: 14, stride: 8, out_channels: 16 };
         assert_eq!((paper.out(), paper.patch_len()), ([16, 20], 560));
         // Appending cuts the same patches after what is there.
         let mut appended = vec![f32::NAN; 3];

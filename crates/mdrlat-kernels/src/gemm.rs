@@ -1,6 +1,8 @@
-//! The one matrix product of the host kernels: the `gemm` crate (the same kernels burn's
+//! The one matrix product of the kernels: the `gemm` crate (the same kernels burn's
 //! `flex` backend multiplies with, AVX-512 where the CPU has it), called on dense row-major
 //! slices with optional transposes and accumulation.
+
+use crate::conv::ConvGeometry;
 
 /// Products of at least this many multiply-adds are split over the current rayon pool's
 /// threads by `gemm` itself (its own tiling; each output element is still summed by one
@@ -15,7 +17,7 @@ thread_local! {
 /// Runs `f` with the host kernels' products and patch cuts kept on the calling thread, no
 /// rayon call among them: from a thread outside a pool, rayon would run them on the global
 /// pool (every core) and wait (see `HostNet::on_calling_thread`).
-pub(crate) fn on_this_thread<R>(f: impl FnOnce() -> R) -> R {
+pub fn on_this_thread<R>(f: impl FnOnce() -> R) -> R {
     /// Restores the flag, also when `f` panics.
     struct Restore(bool);
     impl Drop for Restore {
@@ -29,26 +31,26 @@ pub(crate) fn on_this_thread<R>(f: impl FnOnce() -> R) -> R {
 
 /// Whether work may be split over the current rayon pool's threads: more than one, and not
 /// inside [`on_this_thread`].
-pub(crate) fn may_split() -> bool {
+pub fn may_split() -> bool {
     !THIS_THREAD.get() && rayon::current_num_threads() > 1
 }
 
 /// One operand of a product: row-major `rows × cols` data, or its transpose stored
 /// row-major (`cols × rows`).
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct Mat<'a> {
+pub struct Mat<'a> {
     data: &'a [f32],
     transposed: bool,
 }
 
 impl<'a> Mat<'a> {
     /// The matrix as stored.
-    pub(crate) fn n(data: &'a [f32]) -> Self {
+    pub fn n(data: &'a [f32]) -> Self {
         Self { data, transposed: false }
     }
 
     /// The transpose of the stored matrix.
-    pub(crate) fn t(data: &'a [f32]) -> Self {
+    pub fn t(data: &'a [f32]) -> Self {
         Self { data, transposed: true }
     }
 
@@ -64,15 +66,7 @@ impl<'a> Mat<'a> {
 /// # Panics
 /// If a slice is shorter than its matrix.
 #[allow(unsafe_code)]
-pub(crate) fn gemm(
-    m: usize,
-    n: usize,
-    k: usize,
-    a: Mat<'_>,
-    b: Mat<'_>,
-    c: &mut [f32],
-    accumulate: bool,
-) {
+pub fn gemm(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>, c: &mut [f32], accumulate: bool) {
     assert!(c.len() >= m * n, "gemm: output has {} values, needs {m}x{n}", c.len());
     if k == 0 && !accumulate {
         c[..m * n].fill(0.0);
@@ -94,7 +88,7 @@ const UNINIT_MIN: usize = 1 << 16;
 /// # Panics
 /// If a slice is shorter than its matrix.
 #[allow(unsafe_code)]
-pub(crate) fn gemm_new(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) -> Vec<f32> {
+pub fn gemm_new(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) -> Vec<f32> {
     if m == 0 || n == 0 || k == 0 {
         return vec![0.0; m * n];
     }
@@ -199,7 +193,7 @@ const SHORT_ROWS: usize = 128;
 /// # Panics
 /// If a slice is shorter than its matrix.
 #[allow(unsafe_code)]
-pub(crate) fn gemm_short_by_long(
+pub fn gemm_short_by_long(
     m: usize,
     n: usize,
     k: usize,
@@ -314,7 +308,7 @@ pub(crate) fn gemm_short_by_long(
 /// # Panics
 /// If a slice is shorter than its matrix.
 #[allow(unsafe_code)]
-pub(crate) fn gemm_tall(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) -> Vec<f32> {
+pub fn gemm_tall(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) -> Vec<f32> {
     assert!(a.data.len() >= m * k, "gemm: lhs has {} values, needs {m}x{k}", a.data.len());
     assert!(b.data.len() >= k * n, "gemm: rhs has {} values, needs {k}x{n}", b.data.len());
     #[cfg(target_arch = "x86_64")]
@@ -377,7 +371,7 @@ pub(crate) fn gemm_tall(m: usize, n: usize, k: usize, a: Mat<'_>, b: Mat<'_>) ->
 }
 
 /// A float rounded to bfloat16 (round to nearest, ties to even): its upper 16 bits.
-pub(crate) fn to_bf16(x: f32) -> u16 {
+pub fn to_bf16(x: f32) -> u16 {
     let bits = x.to_bits();
     if x.is_nan() {
         return ((bits >> 16) | 0x40) as u16;
@@ -397,7 +391,7 @@ pub(crate) fn to_bf16(x: f32) -> u16 {
 /// MDRLAT decision slower than with f32 weights: that CPU's prefetchers follow one
 /// sequential stream much better than four interleaved ones.
 #[derive(Debug, Clone)]
-pub(crate) struct Bf16Matrix {
+pub struct Bf16Matrix {
     k: usize,
     n: usize,
     words: Vec<u32>,
@@ -413,7 +407,7 @@ impl Bf16Matrix {
     ///
     /// # Panics
     /// If `w` holds fewer than `k · n` values.
-    pub(crate) fn new(k: usize, n: usize, w: &[f32]) -> Self {
+    pub fn new(k: usize, n: usize, w: &[f32]) -> Self {
         assert!(w.len() >= k * n, "Bf16Matrix: {} weights for {k}x{n}", w.len());
         let half = Self::BLOCK / 2;
         let (groups, blocks) = (k.div_ceil(Self::GROUP), n.div_ceil(Self::BLOCK));
@@ -435,7 +429,7 @@ impl Bf16Matrix {
 
     /// The rounded weight at row `i`, column `j`, widened back to f32.
     #[cfg(test)]
-    pub(crate) fn get(&self, i: usize, j: usize) -> f32 {
+    pub fn get(&self, i: usize, j: usize) -> f32 {
         let (half, blocks) = (Self::BLOCK / 2, self.n.div_ceil(Self::BLOCK));
         let (g, r, b, l) = (i / Self::GROUP, i % Self::GROUP, j / Self::BLOCK, j % Self::BLOCK);
         let word = self.words[((g * blocks + b) * Self::GROUP + r) * half + l % half];
@@ -450,7 +444,7 @@ impl Bf16Matrix {
     /// # Panics
     /// If `x` or `y` is shorter than `k` or `n`.
     #[allow(unsafe_code)]
-    pub(crate) fn vec_mul(&self, x: &[f32], y: &mut [f32]) -> bool {
+    pub fn vec_mul(&self, x: &[f32], y: &mut [f32]) -> bool {
         assert!(x.len() >= self.k && y.len() >= self.n, "Bf16Matrix::vec_mul: short slices");
         #[cfg(target_arch = "x86_64")]
         if avx512::available() {
@@ -471,12 +465,12 @@ impl Bf16Matrix {
 /// Whether `MDRLAT_PORTABLE_KERNELS=1` asks for the portable kernels on a CPU that has
 /// AVX-512 (the `gemm` crate's paths and the plain loops): CI runs the network tests once
 /// so, and the branches a machine with AVX-512 never takes are tested there too.
-pub(crate) fn portable_forced() -> bool {
+pub fn portable_forced() -> bool {
     std::env::var_os("MDRLAT_PORTABLE_KERNELS").is_some_and(|v| v == "1")
 }
 
 /// Whether [`Bf16Matrix::vec_mul`] has its kernel on this CPU.
-pub(crate) fn bf16_available() -> bool {
+pub fn bf16_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         avx512::available()
@@ -490,15 +484,76 @@ pub(crate) fn bf16_available() -> bool {
 /// Geometry of [`conv16`]: a zero-padded `[channels, rows, cols]` image, a `kh × kw`
 /// kernel at `stride`, and `out_rows × out_cols` outputs.
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct Conv16 {
-    pub(crate) channels: usize,
-    pub(crate) rows: usize,
-    pub(crate) cols: usize,
-    pub(crate) kh: usize,
-    pub(crate) kw: usize,
-    pub(crate) stride: usize,
-    pub(crate) out_rows: usize,
-    pub(crate) out_cols: usize,
+pub struct Conv16 {
+    /// Image channels.
+    pub channels: usize,
+    /// Rows of the zero-padded image.
+    pub rows: usize,
+    /// Columns of the zero-padded image.
+    pub cols: usize,
+    /// Kernel rows.
+    pub kh: usize,
+    /// Kernel columns.
+    pub kw: usize,
+    /// Stride (both axes).
+    pub stride: usize,
+    /// Output rows.
+    pub out_rows: usize,
+    /// Output columns.
+    pub out_cols: usize,
+}
+
+impl Conv16 {
+    /// The direct kernel's geometry for a SAME convolution `g` on channel-first images
+    /// zero-padded on every side: `(out - 1) · stride + k` rows and columns, the padding
+    /// before as [`ConvGeometry::pad_before`] (the caller pads; see its `pad_before`).
+    pub fn padded(g: &ConvGeometry) -> Self {
+        let [oh, ow] = g.out();
+        Conv16 {
+            channels: g.c,
+            rows: (oh - 1) * g.stride + g.kh,
+            cols: (ow - 1) * g.stride + g.kw,
+            kh: g.kh,
+            kw: g.kw,
+            stride: g.stride,
+            out_rows: oh,
+            out_cols: ow,
+        }
+    }
+
+    /// The channel-first `image` of `g` zero-padded into `padded` as this geometry reads it
+    /// (made [`Conv16::padded`] from `g`); `false` where the padding does not take that form
+    /// (the caller cuts patches instead). The border stays zero from the buffer's first use:
+    /// only the interior is written.
+    pub fn pad(&self, g: &ConvGeometry, image: &[f32], padded: &mut Vec<f32>) -> bool {
+        let [pt, pl] = g.pad_before();
+        let (h, w) = (g.h, g.w);
+        if pt + h > self.rows || pl + w > self.cols || image.len() != g.c * h * w {
+            return false;
+        }
+        let len = self.image_len();
+        if padded.len() != len {
+            padded.clear();
+            padded.resize(len, 0.0);
+        }
+        for (ch, plane) in image.chunks_exact(h * w).enumerate() {
+            for (iy, src) in plane.chunks_exact(w).enumerate() {
+                let at = (ch * self.rows + pt + iy) * self.cols + pl;
+                padded[at..at + w].copy_from_slice(src);
+            }
+        }
+        true
+    }
+
+    /// Floats of one zero-padded image.
+    pub fn image_len(&self) -> usize {
+        self.channels * self.rows * self.cols
+    }
+
+    /// FLOPs of the convolution on one image (and of its weight gradient).
+    pub fn flop(&self) -> usize {
+        2 * self.out_rows * self.out_cols * self.channels * self.kh * self.kw * 16
+    }
 }
 
 /// A convolution with 16 filters straight from a zero-padded image, no patches:
@@ -513,7 +568,7 @@ pub(crate) struct Conv16 {
 /// # Panics
 /// If the kernel does not fit the padded image or a slice is short.
 #[allow(unsafe_code)]
-pub(crate) fn conv16(g: &Conv16, img: &[f32], wt: &[f32], out: &mut [f32], next: &[f32]) -> bool {
+pub fn conv16(g: &Conv16, img: &[f32], wt: &[f32], out: &mut [f32], next: &[f32]) -> bool {
     assert!(
         g.out_rows > 0 && g.out_cols > 0 && g.stride > 0 && g.kh > 0 && g.kw > 0 && g.channels > 0,
         "conv16 geometry"
@@ -550,7 +605,7 @@ pub(crate) fn conv16(g: &Conv16, img: &[f32], wt: &[f32], out: &mut [f32], next:
 /// # Panics
 /// As [`conv16`].
 #[allow(unsafe_code)]
-pub(crate) fn conv16_weight_grad(
+pub fn conv16_weight_grad(
     g: &Conv16,
     img: &[f32],
     dy: &[f32],

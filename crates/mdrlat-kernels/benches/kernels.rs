@@ -6,7 +6,11 @@
 //! where every weight is read once per pass).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};
-use mdrlat_nn::host::products;
+use mdrlat_kernels::ConvGeometry;
+use mdrlat_kernels::conv::conv_relu;
+use mdrlat_kernels::gemm::{
+    Conv16, Mat, conv16, conv16_weight_grad, gemm, gemm_short_by_long, gemm_tall,
+};
 use std::hint::black_box;
 
 /// The allocator `mdrlat` runs with, keeping freed memory as the CLI does: the gradient
@@ -61,7 +65,7 @@ fn forward(c: &mut Criterion) {
                     b.iter(|| {
                         i += usize::from(cold);
                         let w = &ws[i % ws.len()];
-                        pool.install(|| products::forward(batch, din, dout, &x, w, &mut y));
+                        pool.install(|| gemm_short_by_long(batch, dout, din, &x, w, &mut y, true));
                         black_box(y[0]);
                     })
                 });
@@ -71,7 +75,7 @@ fn forward(c: &mut Criterion) {
                             i += usize::from(cold);
                             let w = &ws[i % ws.len()];
                             pool.install(|| {
-                                products::forward_gemm_crate(batch, din, dout, &x, w, &mut y)
+                                gemm(batch, dout, din, Mat::n(&x), Mat::n(w), &mut y, true)
                             });
                             black_box(y[0]);
                         })
@@ -130,7 +134,7 @@ fn vector_matrix(c: &mut Criterion) {
             b.iter(|| {
                 i += 1;
                 let w = &ws[i % ws.len()];
-                pool.install(|| products::forward(1, din, dout, &x, w, &mut y));
+                pool.install(|| gemm_short_by_long(1, dout, din, &x, w, &mut y, true));
                 black_box(y[0]);
             })
         });
@@ -138,7 +142,7 @@ fn vector_matrix(c: &mut Criterion) {
             b.iter(|| {
                 i += 1;
                 let w = &ws[i % ws.len()];
-                pool.install(|| products::forward_gemm_crate(1, din, dout, &x, w, &mut y));
+                pool.install(|| gemm(1, dout, din, Mat::n(&x), Mat::n(w), &mut y, true));
                 black_box(y[0]);
             })
         });
@@ -158,7 +162,7 @@ fn backward(c: &mut Criterion) {
         let id = format!("{batch}x{din}->{dout}/{threads}t");
         g.bench_function(BenchmarkId::new("weight_gradient", &id), |b| {
             b.iter(|| {
-                black_box(pool.install(|| products::weight_gradient(batch, din, dout, &x, &dy)))
+                black_box(pool.install(|| gemm_tall(din, dout, batch, Mat::t(&x), Mat::n(&dy))))
             })
         });
         let mut i = 0;
@@ -166,7 +170,7 @@ fn backward(c: &mut Criterion) {
             b.iter(|| {
                 i += 1;
                 let w = &ws[i % ws.len()];
-                black_box(pool.install(|| products::input_gradient_t(batch, din, dout, w, &dy)))
+                black_box(pool.install(|| gemm_tall(din, batch, dout, Mat::n(w), Mat::t(&dy))))
             })
         });
     }
@@ -177,21 +181,25 @@ fn backward(c: &mut Criterion) {
 /// gradient: the kernel that holds ~64 % of the streams' FLOPs.
 fn first_conv(c: &mut Criterion) {
     let mut g = c.benchmark_group("first_conv_flops");
-    let image = values(products::first_conv_image_len(), 4);
+    // The paper's first depth layer on a 4 × 128 × 160 stack, as the learner runs it.
+    let geometry =
+        ConvGeometry { h: 128, w: 160, c: 4, kh: 10, kw: 14, stride: 8, out_channels: 16 };
+    let direct = Conv16::padded(&geometry);
+    let image = values(direct.image_len(), 4);
     let wt = values(560 * 16, 5);
     let dy = values(320 * 16, 6);
     let mut out = vec![0.0f32; 320 * 16];
     let mut dwt = vec![0.0f32; 560 * 16];
-    if !products::first_conv(&image, &wt, &mut out) {
+    if !conv16(&direct, &image, &wt, &mut out, &[]) {
         eprintln!("first_conv_flops: no AVX-512 on this CPU, skipped");
         return;
     }
-    g.throughput(Throughput::Elements(products::first_conv_flop() as u64));
+    g.throughput(Throughput::Elements(direct.flop() as u64));
     g.bench_function("forward", |b| {
-        b.iter(|| black_box(products::first_conv(&image, &wt, &mut out)))
+        b.iter(|| black_box(conv16(&direct, &image, &wt, &mut out, &[])))
     });
     g.bench_function("weight_gradient", |b| {
-        b.iter(|| black_box(products::first_conv_weight_grad(&image, &dy, &mut dwt)))
+        b.iter(|| black_box(conv16_weight_grad(&direct, &image, &dy, &mut dwt, &[])))
     });
     g.finish();
 }
@@ -206,12 +214,13 @@ fn later_convs(c: &mut Criterion) {
         [("conv2", [16, 20, 16, 4, 4, 2, 32]), ("conv3", [8, 10, 32, 3, 3, 1, 32])];
     for (name, geo) in layers {
         let [h, w, ch, kh, kw, stride, out] = geo;
+        let geometry = ConvGeometry { h, w, c: ch, kh, kw, stride, out_channels: out };
         let batch = 32;
         let positions = h.div_ceil(stride) * w.div_ceil(stride);
         let k = kh * kw * ch;
         let x = values(batch * h * w * ch, 7);
         let w = values(out * k, 8);
-        let wt = products::transposed(&w, out);
+        let wt = mdrlat_kernels::transposed(&w, out);
         let bias = values(out, 9);
         let mut cols = Vec::new();
         g.throughput(Throughput::Elements((2 * batch * positions * k * out) as u64));
@@ -221,7 +230,7 @@ fn later_convs(c: &mut Criterion) {
                 b.iter(|| {
                     black_box(
                         pool.install(|| {
-                            products::conv_relu(geo, &x, batch, &w, &wt, &bias, &mut cols)
+                            conv_relu(&geometry, &x, batch, (&w, &wt), &bias, &mut cols)
                         }),
                     )
                 })
