@@ -180,6 +180,35 @@ fn a_goal_conditioned_network_trains_and_is_evaluated_on_navigation() {
         dir.join("e").to_str().expect("utf-8"),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
+    // Checkpoint averaging: the mean of the run's and the shipped model's weights exports as
+    // one model that records both; a network of another task is refused, naming it.
+    let mean = dir.join("mean");
+    let shipped_s = shipped.to_str().expect("utf-8");
+    let o = mdrlat(&[
+        "export",
+        "--checkpoint",
+        r,
+        "--checkpoint",
+        shipped_s,
+        "--samples",
+        "20",
+        "--out",
+        mean.to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let readme = std::fs::read_to_string(mean.join("README.md")).expect("README");
+    assert!(readme.contains("the mean of 2 checkpoints' weights"), "{readme}");
+    let avoid = concat!(env!("CARGO_MANIFEST_DIR"), "/../../models/laser-only-cpu-small");
+    let o = mdrlat(&[
+        "export",
+        "--checkpoint",
+        r,
+        "--checkpoint",
+        avoid,
+        "--out",
+        dir.join("mixed").to_str().expect("utf-8"),
+    ]);
+    assert_clean_failure(&o, &["laser-only-cpu-small", "only networks of one variant and task"]);
     // The ROS node has no goal to give it.
     assert_clean_failure(
         &mdrlat(&["ros", "--checkpoint", r]),

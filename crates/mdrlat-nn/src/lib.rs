@@ -18,6 +18,7 @@
 
 #![forbid(unsafe_code)] // the kernels' unsafe code lives in `mdrlat-kernels`
 
+mod average;
 pub mod host;
 mod init;
 mod net;

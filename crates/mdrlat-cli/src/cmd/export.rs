@@ -18,9 +18,11 @@ use std::path::{Path, PathBuf};
 /// Arguments of `mdrlat export`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// A run directory of `mdrlat train` (or its checkpoint folder).
-    #[arg(long, value_name = "RUN_DIR")]
-    checkpoint: PathBuf,
+    /// A run directory of `mdrlat train` (or its checkpoint folder, or a model). Given
+    /// several times, the model is the mean of their weights (checkpoint averaging: the
+    /// same variant and task; e.g. a run's last few checkpoints).
+    #[arg(long, value_name = "RUN_DIR", required = true)]
+    checkpoint: Vec<PathBuf>,
     /// The model folder to write (model.safetensors, README.md).
     #[arg(long)]
     out: PathBuf,
@@ -128,6 +130,50 @@ fn readme(
     s
 }
 
+/// The policy of one checkpoint, or of the mean of several checkpoints' weights.
+fn load_mean(
+    checkpoints: &[PathBuf],
+    device: &mdrlat_nn::burn::prelude::Device,
+) -> Result<GreedyPolicy> {
+    let load = |c: &PathBuf| {
+        GreedyPolicy::load(c, device, 1)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("--checkpoint {}", c.display()))
+    };
+    let policies = checkpoints.iter().map(load).collect::<Result<Vec<_>>>()?;
+    let mut policies = policies.into_iter();
+    let first = policies.next().context("no --checkpoint")?;
+    let rest: Vec<GreedyPolicy> = policies.collect();
+    if rest.is_empty() {
+        return Ok(first);
+    }
+    for (p, path) in rest.iter().zip(&checkpoints[1..]) {
+        if p.variant() != first.variant() || p.task() != first.task() {
+            bail!(
+                "--checkpoint {}: a {} network for {:?}, the first --checkpoint a {} network for {:?}: only networks of one variant and task can be averaged",
+                path.display(),
+                p.variant(),
+                p.task(),
+                first.variant(),
+                first.task()
+            );
+        }
+    }
+    let nets: Vec<&mdrlat_nn::QNet> =
+        std::iter::once(first.net()).chain(rest.iter().map(|p| p.net())).collect();
+    let mean = mdrlat_nn::QNet::average(&nets).map_err(anyhow::Error::msg)?;
+    let source = format!(
+        "the mean of {} checkpoints' weights: {}",
+        nets.len(),
+        std::iter::once(first.source())
+            .chain(rest.iter().map(|p| p.source()))
+            .collect::<Vec<_>>()
+            .join("; ")
+    );
+    GreedyPolicy::from_net(first.config().clone(), mean, device, 1, source)
+        .map_err(anyhow::Error::msg)
+}
+
 /// Runs `mdrlat export`.
 pub fn run(a: &Args) -> Result<()> {
     let model = a.out.join("model.safetensors");
@@ -141,9 +187,7 @@ pub fn run(a: &Args) -> Result<()> {
         bail!("--samples {}: must be 1 to 100000", a.samples);
     }
     let device = DeviceKind::Cpu.device();
-    let mut original = GreedyPolicy::load(&a.checkpoint, &device, 1)
-        .map_err(anyhow::Error::msg)
-        .with_context(|| format!("--checkpoint {}", a.checkpoint.display()))?;
+    let mut original = load_mean(&a.checkpoint, &device)?;
     let eval_table = match &a.eval {
         Some(dir) => {
             // A navigation evaluation's table is navigation.md (time, path, path ratio).
@@ -156,11 +200,16 @@ pub fn run(a: &Args) -> Result<()> {
     };
     ensure_dir(&a.out)?;
     let precision = if a.f32 { Precision::F32 } else { Precision::F16 };
-    let step =
-        original.source().rsplit_once("(step ").map(|(_, s)| s.trim_end_matches(')').to_string());
-    let mut extra = vec![("mdrlat_source", a.checkpoint.display().to_string())];
-    if let Some(step) = step {
-        extra.push(("mdrlat_step", step));
+    let steps: Vec<String> = original
+        .source()
+        .split("(step ")
+        .skip(1)
+        .filter_map(|s| s.split_once(')').map(|(step, _)| step.to_string()))
+        .collect();
+    let sources: Vec<String> = a.checkpoint.iter().map(|c| c.display().to_string()).collect();
+    let mut extra = vec![("mdrlat_source", sources.join(", "))];
+    if !steps.is_empty() {
+        extra.push(("mdrlat_step", steps.join(", ")));
     }
     save_safetensors_as(original.net(), original.config(), &model, precision, &extra)
         .map_err(anyhow::Error::msg)?;

@@ -1,0 +1,121 @@
+//! The mean of several networks' weights (checkpoint averaging): successive checkpoints of
+//! one run lie in one basin, and the mean of the last few is a steadier policy than any one
+//! of them (SWA; `mdrlat export --checkpoint A --checkpoint B …`).
+
+use crate::net::QNet;
+use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
+use burn::prelude::*;
+
+/// Every float parameter's values and shape, in visiting order.
+struct Collect(Vec<(Vec<usize>, Vec<f32>)>);
+
+impl ModuleVisitor for Collect {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let t = param.val();
+        self.0.push((t.dims().to_vec(), t.into_data().iter::<f32>().collect()));
+    }
+}
+
+/// Replaces each float parameter, in visiting order, by the next of `values` (its id kept).
+struct Replace(std::vec::IntoIter<Vec<f32>>);
+
+impl ModuleMapper for Replace {
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        let (id, old, mapper) = param.consume();
+        let dims = old.dims();
+        let values = self.0.next().expect("one value list per parameter (counted before)");
+        let t = Tensor::<D>::from_data(TensorData::new(values, dims), &old.device());
+        Param::from_mapped_value(id, t, mapper)
+    }
+}
+
+impl QNet {
+    /// The element-wise mean of the weights of `nets` (summed in `f64` in the order given),
+    /// in a copy of the first. Each network must have the same parameters with the same
+    /// shapes (the same variant and input): anything else is an error naming the first
+    /// mismatch.
+    ///
+    /// # Errors
+    /// No networks, or networks of different architectures.
+    pub fn average(nets: &[&QNet]) -> Result<QNet, String> {
+        let first = nets.first().ok_or("averaging needs at least one network")?;
+        let collect = |net: &QNet| {
+            let mut c = Collect(Vec::new());
+            net.visit(&mut c);
+            c.0
+        };
+        let base = collect(first);
+        let mut sums: Vec<Vec<f64>> =
+            base.iter().map(|(_, v)| v.iter().map(|&x| f64::from(x)).collect()).collect();
+        for (k, net) in nets.iter().enumerate().skip(1) {
+            let other = collect(net);
+            if other.len() != base.len() {
+                return Err(format!(
+                    "network {} has {} parameter tensors, the first {}: not the same architecture",
+                    k + 1,
+                    other.len(),
+                    base.len()
+                ));
+            }
+            for (i, ((dims, values), sum)) in other.iter().zip(sums.iter_mut()).enumerate() {
+                if *dims != base[i].0 {
+                    return Err(format!(
+                        "network {}: parameter {} is {dims:?}, the first network's {:?}: not the same architecture",
+                        k + 1,
+                        i + 1,
+                        base[i].0
+                    ));
+                }
+                for (s, &v) in sum.iter_mut().zip(values) {
+                    *s += f64::from(v);
+                }
+            }
+        }
+        let n = nets.len() as f64;
+        let means: Vec<Vec<f32>> =
+            sums.into_iter().map(|s| s.into_iter().map(|v| (v / n) as f32).collect()).collect();
+        Ok((*first).clone().map(&mut Replace(means.into_iter())))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::{QNet, QNetConfig, Variant};
+    use burn::module::{Module, ModuleVisitor, Param};
+    use burn::prelude::*;
+
+    fn weights(net: &QNet) -> Vec<f32> {
+        struct All(Vec<f32>);
+        impl ModuleVisitor for All {
+            fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+                self.0.extend(param.val().into_data().iter::<f32>());
+            }
+        }
+        let mut a = All(Vec::new());
+        net.visit(&mut a);
+        a.0
+    }
+
+    #[test]
+    fn the_average_is_the_element_wise_mean() {
+        let device = Default::default();
+        let config = QNetConfig::new(Variant::LaserOnly);
+        let nets: Vec<QNet> = (0..3).map(|s| config.init_seeded(&device, s)).collect();
+        let avg = QNet::average(&nets.iter().collect::<Vec<_>>()).expect("same architecture");
+        let (w, got) = (nets.iter().map(weights).collect::<Vec<_>>(), weights(&avg));
+        assert_eq!(got.len(), w[0].len());
+        for (i, g) in got.iter().enumerate() {
+            let want =
+                ((f64::from(w[0][i]) + f64::from(w[1][i]) + f64::from(w[2][i])) / 3.0) as f32;
+            assert_eq!(*g, want, "weight {i}");
+        }
+        // One network averages to itself; the parameter ids are the first network's.
+        let one = QNet::average(&[&nets[1]]).expect("one");
+        assert_eq!(weights(&one), w[1]);
+        // Different architectures are an error, not a silent mix.
+        let other = QNetConfig::new(Variant::DepthOnly).init_seeded(&device, 0);
+        let err = QNet::average(&[&nets[0], &other]).expect_err("different variants");
+        assert!(err.contains("not the same architecture"), "{err}");
+        assert!(QNet::average(&[]).is_err());
+    }
+}
