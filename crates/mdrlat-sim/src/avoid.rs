@@ -67,6 +67,9 @@ pub struct AvoidConfig {
     /// Score lost for driving the body's leading half where nothing that sees low
     /// obstacles has seen free (the share of such probes along the roll-out).
     pub unknown_weight: f32,
+    /// Read the depth camera (`false`: the laser alone, `avoid-laser`, which then cannot
+    /// know what is free below its plane and does not score it).
+    pub depth: bool,
 }
 
 impl AvoidConfig {
@@ -117,6 +120,7 @@ impl Default for AvoidConfig {
             walker_min_speed: 0.15,
             walker_max_speed: 1.2,
             unknown_weight: 1.5,
+            depth: true,
         }
     }
 }
@@ -243,7 +247,10 @@ impl AvoidPolicy {
     fn decide_slot(&mut self, slot: usize, obs: &Observation) -> Action {
         self.depth_ranges.resize(self.depth.column_angles.len(), f32::INFINITY);
         let mut depth_ranges = std::mem::take(&mut self.depth_ranges);
-        self.depth.obstacle_ranges(obs.depth.latest(), 0.03, self.body_height_m, &mut depth_ranges);
+        if self.config.depth {
+            let latest = obs.depth.latest();
+            self.depth.obstacle_ranges(latest, 0.03, self.body_height_m, &mut depth_ranges);
+        }
         let mut s = std::mem::take(self.slot(slot));
         // 1. Odometry: replay the last command from the previous velocity.
         if s.step > 0 {
@@ -311,7 +318,7 @@ impl AvoidPolicy {
                 let i = ((a - a0) / da).round();
                 (0.0..n as f32).contains(&i) && r + clear_slack < laser[i as usize]
             };
-            let depth_through = cell.depth && a.abs() < std::f32::consts::FRAC_PI_2 && {
+            let depth_through = c.depth && cell.depth && a.abs() < std::f32::consts::FRAC_PI_2 && {
                 let k = ((a.tan() - tan0) / dtan).round();
                 (0.0..cols as f32).contains(&k) && {
                     let k = k as usize;
@@ -339,7 +346,7 @@ impl AvoidPolicy {
             mark(&mut s.cells, p, true);
         }
         for (&r, &a) in depth_ranges.iter().zip(&self.depth.column_angles) {
-            if r.is_finite() {
+            if c.depth && r.is_finite() {
                 mark(&mut s.cells, Vec2::new(r * a.cos(), r * a.sin()), false);
             }
         }
@@ -360,8 +367,8 @@ impl AvoidPolicy {
         for (col, ((&r, &a), &k)) in
             depth_ranges.iter().zip(&self.depth.column_angles).zip(&self.depth.column_k).enumerate()
         {
-            if bottom[col] <= 0.0 {
-                continue; // the floor is hidden (something nearer than the minimum range)
+            if !c.depth || bottom[col] <= 0.0 {
+                continue; // no camera, or the floor is hidden (something nearer than its minimum range)
             }
             let (from, to) = (self.near_z * k, (r - 2.0 * c.cell_m).min(c.lookahead_m + 1.5));
             let dir = Vec2::new(a.cos(), a.sin());
@@ -520,7 +527,7 @@ impl AvoidPolicy {
                 + 0.8 * open / c.lookahead_m
                 + 0.4 * away
                 - 0.15 * cmd.w.abs()
-                - c.unknown_weight * unknown
+                - if c.depth { c.unknown_weight * unknown } else { 0.0 }
                 - dither;
             if best.is_none_or(|(b, _)| score > b) {
                 best = Some((score, action));
@@ -533,10 +540,10 @@ impl AvoidPolicy {
 
 impl Policy for AvoidPolicy {
     fn name(&self) -> String {
-        "avoid".into()
+        if self.config.depth { "avoid" } else { "avoid-laser" }.into()
     }
     fn sensors(&self) -> Sensors {
-        Sensors::BOTH
+        Sensors { laser: true, depth: self.config.depth }
     }
     fn begin_episode(&mut self, slot: usize, _seed: Option<u64>) {
         *self.slot(slot) = Slot::default();
@@ -565,5 +572,38 @@ mod tests {
         );
         assert!(bad(AvoidConfig { cell_m: f32::NAN, ..AvoidConfig::default() }).contains("cell_m"));
         assert!(bad(AvoidConfig { margin_m: -0.1, ..AvoidConfig::default() }).contains("margin_m"));
+    }
+
+    /// `avoid-laser` never reads the camera: the same episode with the depth images blanked
+    /// gets the same actions, and it says it needs only the laser; `avoid` does read them.
+    #[test]
+    fn the_laser_only_avoider_ignores_the_camera() {
+        use crate::Env;
+        use crate::policy::Scripted;
+        let world = mdrlat_world::builtin::get("office").expect("builtin").expect("valid");
+        let sim = SimConfig::default();
+        let drive = |p: Scripted, blank: bool| {
+            let mut env = Env::from_world(world.clone(), sim.clone()).expect("env");
+            let mut policy = p.build(&sim, 0);
+            let mut obs = env.reset(Some(7)).expect("reset").clone();
+            let mut actions = Vec::new();
+            for _ in 0..120 {
+                if blank {
+                    obs.depth = mdrlat_core::FrameStack::new(obs.depth.frame_len());
+                }
+                let a = mdrlat_core::decide_one(policy.as_mut(), &obs, 0).expect("decides").action;
+                actions.push(a);
+                let step = env.step(a).expect("step");
+                if step.terminated || step.truncated {
+                    break;
+                }
+                obs = step.observation.clone();
+            }
+            (actions, policy.sensors(), policy.name())
+        };
+        let (seen, sensors, name) = drive(Scripted::AvoidLaser, false);
+        assert_eq!(drive(Scripted::AvoidLaser, true).0, seen, "avoid-laser read the camera");
+        assert_eq!((sensors.laser, sensors.depth, name.as_str()), (true, false, "avoid-laser"));
+        assert_ne!(drive(Scripted::Avoid, true).0, drive(Scripted::Avoid, false).0);
     }
 }

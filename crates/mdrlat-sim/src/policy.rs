@@ -32,11 +32,14 @@ pub enum Scripted {
     /// ten actions on a local costmap of both sensors carried by odometry, with the walkers'
     /// motion from consecutive scans. The baseline that says how achievable a world is.
     Avoid,
+    /// The same avoider with the laser alone: what a policy that reads only the laser can
+    /// achieve in a world (the yardstick of the laser-only networks).
+    AvoidLaser,
 }
 
 impl Scripted {
     /// Every scripted policy, in the order of [`Scripted::name`]s listed in errors.
-    pub const ALL: [Scripted; 7] = [
+    pub const ALL: [Scripted; 8] = [
         Scripted::Random,
         Scripted::Forward,
         Scripted::Wander,
@@ -44,6 +47,7 @@ impl Scripted {
         Scripted::Spin,
         Scripted::Circle,
         Scripted::Avoid,
+        Scripted::AvoidLaser,
     ];
 
     /// The name used on the command line and in reports.
@@ -56,6 +60,7 @@ impl Scripted {
             Scripted::Spin => "spin",
             Scripted::Circle => "circle",
             Scripted::Avoid => "avoid",
+            Scripted::AvoidLaser => "avoid-laser",
         }
     }
 
@@ -72,7 +77,11 @@ impl Scripted {
             Scripted::Forward => best(|c| c.w == 0.0, |c| -c.v),
             Scripted::Spin => best(|c| c.v == 0.0 && c.w != 0.0, |c| -c.w.abs()),
             Scripted::Circle => best(|c| c.v > 0.0 && c.w != 0.0, |c| c.v / c.w.abs()),
-            Scripted::Random | Scripted::Wander | Scripted::WanderLaser | Scripted::Avoid => None,
+            Scripted::Random
+            | Scripted::Wander
+            | Scripted::WanderLaser
+            | Scripted::Avoid
+            | Scripted::AvoidLaser => None,
         }
     }
 
@@ -94,10 +103,14 @@ impl Scripted {
                 config.robot.body_height_m,
             )),
             Scripted::WanderLaser => Box::new(WanderPolicy::new(laser.angles())),
-            Scripted::Avoid => Box::new(
-                crate::AvoidPolicy::new(config, crate::AvoidConfig::default())
-                    .unwrap_or_else(|e| unreachable!("the default settings are valid: {e}")),
-            ),
+            Scripted::Avoid | Scripted::AvoidLaser => {
+                let settings =
+                    crate::AvoidConfig { depth: self == Scripted::Avoid, ..Default::default() };
+                Box::new(
+                    crate::AvoidPolicy::new(config, settings)
+                        .unwrap_or_else(|e| unreachable!("the default settings are valid: {e}")),
+                )
+            }
         }
     }
 }
