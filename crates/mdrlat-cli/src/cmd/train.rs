@@ -173,8 +173,7 @@ pub fn run(a: &Args) -> Result<()> {
                 config.train.seed = s;
             }
             a.task.apply(&mut config.sim)?;
-            config.sim.validate()?;
-            config.train.validate()?;
+            config.validate("--variant, --steps, --seed or --task")?;
             let device = a.device.unwrap_or(DeviceKind::Cpu);
             let default_world = a.preset.default_world(config.sim.task);
             let world = a.world.clone().unwrap_or_else(|| default_world.into());
