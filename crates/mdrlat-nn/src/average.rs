@@ -1,6 +1,7 @@
-//! The mean of several networks' weights (checkpoint averaging): successive checkpoints of
-//! one run lie in one basin, and the mean of the last few is a steadier policy than any one
-//! of them (SWA; `mdrlat export --checkpoint A --checkpoint B …`).
+//! Averages of networks' weights: the mean of several checkpoints (`mdrlat export
+//! --checkpoint A --checkpoint B …`) and the running average a run can keep of its online
+//! network (`train.average_horizon`). Successive weights of one run lie in one basin, and
+//! their mean is a steadier policy than any one of them (SWA, Polyak averaging).
 
 use crate::net::QNet;
 use burn::module::{Module, ModuleMapper, ModuleVisitor, Param};
@@ -30,6 +31,33 @@ impl ModuleMapper for Replace {
 }
 
 impl QNet {
+    /// `self + w · (other − self)`, element-wise, in a copy of `self` (its parameter ids
+    /// kept, new storage): one step of an exponential moving average of `other`'s weights
+    /// (`w = 1` copies them). Both must have the same parameters with the same shapes.
+    ///
+    /// # Errors
+    /// Networks of different architectures, or `w` outside `[0, 1]`.
+    pub fn blend_toward(&self, other: &QNet, w: f32) -> Result<QNet, String> {
+        if !(0.0..=1.0).contains(&w) {
+            return Err(format!("blend weight {w} outside [0, 1]"));
+        }
+        let collect = |net: &QNet| {
+            let mut c = Collect(Vec::new());
+            net.visit(&mut c);
+            c.0
+        };
+        let (mine, theirs) = (collect(self), collect(other));
+        if mine.len() != theirs.len() || mine.iter().zip(&theirs).any(|((a, _), (b, _))| a != b) {
+            return Err("blending networks of different architectures".into());
+        }
+        let values: Vec<Vec<f32>> = mine
+            .into_iter()
+            .zip(theirs)
+            .map(|((_, a), (_, b))| a.iter().zip(&b).map(|(&a, &b)| a + w * (b - a)).collect())
+            .collect();
+        Ok(self.clone().map(&mut Replace(values.into_iter())))
+    }
+
     /// The element-wise mean of the weights of `nets` (summed in `f64` in the order given),
     /// in a copy of the first. Each network must have the same parameters with the same
     /// shapes (the same variant and input): anything else is an error naming the first
@@ -117,5 +145,14 @@ mod tests {
         let err = QNet::average(&[&nets[0], &other]).expect_err("different variants");
         assert!(err.contains("not the same architecture"), "{err}");
         assert!(QNet::average(&[]).is_err());
+        // Blending: w = 1 copies, w = 0 keeps, between is a + w (b - a); ids stay the first's.
+        let (a, b) = (&nets[0], &nets[1]);
+        assert_eq!(weights(&a.blend_toward(b, 1.0).expect("copy")), w[1]);
+        assert_eq!(weights(&a.blend_toward(b, 0.0).expect("keep")), w[0]);
+        let quarter = weights(&a.blend_toward(b, 0.25).expect("blend"));
+        for (i, q) in quarter.iter().enumerate() {
+            assert_eq!(*q, w[0][i] + 0.25 * (w[1][i] - w[0][i]), "weight {i}");
+        }
+        assert!(a.blend_toward(&other, 0.5).is_err() && a.blend_toward(b, 1.5).is_err());
     }
 }

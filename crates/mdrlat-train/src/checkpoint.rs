@@ -4,7 +4,8 @@
 //! A checkpoint is the folder `checkpoint/` of a run directory:
 //! `meta.json` (format version, variant, counters, RNG and environment state, the replay
 //! file's length and checksum), `online.bpk`, `target.bpk`, `optimizer.bpk` (burnpack; with
-//! the auxiliary loss's own Adam also `optimizer-aux.bpk`) and `replay.bin`. It is written to `checkpoint.tmp/` and then swapped in, so a run killed
+//! the auxiliary loss's own Adam also `optimizer-aux.bpk`; with `train.average_horizon` the
+//! averaged network, `average.bpk`) and `replay.bin`. It is written to `checkpoint.tmp/` and then swapped in, so a run killed
 //! at any moment (even `kill -9`) keeps its previous checkpoint and loses at most one
 //! checkpoint interval. The replay buffer is saved in full (0.8 GB for depth variants):
 //! without it a resumed run would relearn from an empty buffer and diverge from the

@@ -66,6 +66,15 @@ pub struct TrainConfig {
     /// `L_TD + aux_loss_weight · L_AT` (mdrlat before 2026-12-06; runs written then resume
     /// with it).
     pub aux_optimizer: AuxOptimizer,
+    /// Polyak averaging of the policy (0: off, the paper's): every [`AVERAGE_EVERY`]
+    /// gradient steps the run's averaged network moves toward the online one,
+    /// `θ̄ ← θ̄ + w (θ − θ̄)` with `w = max(AVERAGE_EVERY / average_horizon, 1 / n)` at the
+    /// `n`-th move (a plain mean of the online weights until the horizon is reached, then an
+    /// exponential average over about `average_horizon` gradient steps). The averaged
+    /// network is what the run's evaluations, learning curves and `model.safetensors` use
+    /// and what `mdrlat eval --checkpoint` reads; exploration and the TD targets use the
+    /// online network as always.
+    pub average_horizon: u64,
     /// Steps between greedy evaluations (Fig. 4).
     pub eval_interval: u64,
     /// Episodes per evaluation, from fixed start poses.
@@ -102,6 +111,9 @@ pub struct TrainConfig {
     pub model_precision: Precision,
 }
 
+/// Gradient steps between two moves of the averaged network ([`TrainConfig::average_horizon`]).
+pub const AVERAGE_EVERY: u64 = 100;
+
 impl Default for TrainConfig {
     fn default() -> Self {
         Self {
@@ -126,6 +138,7 @@ impl Default for TrainConfig {
             demo_share: 0.5,
             aux_loss_weight: 1.0,
             aux_optimizer: AuxOptimizer::Separate,
+            average_horizon: 0,
             eval_interval: 5_000,
             eval_episodes: 5,
             eval_seed: 1_000_000,
@@ -274,6 +287,15 @@ impl TrainConfig {
                     "{} is beyond train.checkpoint_interval ({}) or train.total_steps ({}): \
                      a checkpoint cannot hold the demonstrator's state",
                     self.demo_steps, self.checkpoint_interval, self.total_steps
+                ),
+            );
+        }
+        if self.average_horizon != 0 && self.average_horizon < AVERAGE_EVERY {
+            return err(
+                "train.average_horizon",
+                format!(
+                    "{} is below {AVERAGE_EVERY}, the gradient steps between two moves of the                      average (0 turns it off)",
+                    self.average_horizon
                 ),
             );
         }

@@ -2,7 +2,7 @@
 //! (paper eqs. 10, 12, 13; Algorithm 1 lines 6–17).
 
 use crate::adam::{AdamCounts, FusedAdam};
-use crate::config::{AuxOptimizer, TrainConfig};
+use crate::config::{AVERAGE_EVERY, AuxOptimizer, TrainConfig};
 use crate::replay::{Batch, DepthLayout};
 use mdrlat_core::{
     Action, DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY, PolicyError,
@@ -102,6 +102,11 @@ pub struct Learner {
     /// double-DQN argmax use it, so the module is not re-mapped on every call.
     plain: QNet,
     target: QNet,
+    /// The running average of the online weights (`train.average_horizon`), once the first
+    /// [`AVERAGE_EVERY`] gradient steps are done: the policy the run evaluates and ships.
+    averaged: Option<QNet>,
+    /// `train.average_horizon` (0: no average).
+    average_horizon: u64,
     /// Adam of the TD loss (eq. 13), and of the auxiliary loss too with
     /// [`AuxOptimizer::Joint`].
     optim: ModuleOptimizer,
@@ -305,6 +310,8 @@ fn discount(gamma: f32, batch: &Batch, i: usize) -> f32 {
 pub const OPTIMIZER_FILE: &str = "optimizer.bpk";
 /// The auxiliary loss's Adam state in a checkpoint, where it has its own.
 pub const AUX_OPTIMIZER_FILE: &str = "optimizer-aux.bpk";
+/// The averaged network's file in a checkpoint (`train.average_horizon`).
+pub const AVERAGE_FILE: &str = "average.bpk";
 
 /// Milliseconds from each of three phase starts to the next, the last up to now.
 fn phase_ms(starts: [std::time::Instant; 3]) -> [f64; 3] {
@@ -358,6 +365,8 @@ impl Learner {
             online,
             plain,
             target,
+            averaged: None,
+            average_horizon: config.average_horizon,
             optim,
             optim_aux,
             adam_counts,
@@ -497,12 +506,13 @@ impl Learner {
     /// # Errors
     /// The thread pool cannot start.
     pub fn greedy_policy(&self, threads: usize) -> Result<crate::GreedyPolicy, String> {
+        let which = if self.averaged.is_some() { "averaged" } else { "online" };
         crate::GreedyPolicy::from_net(
             self.net_config.clone(),
-            self.plain.clone(),
+            self.policy_net(),
             &self.device,
             threads,
-            format!("online network, update {}", self.updates),
+            format!("{which} network, update {}", self.updates),
         )
     }
 
@@ -647,7 +657,21 @@ impl Learner {
             }
         };
         self.updates += 1;
+        if self.average_horizon > 0 && self.updates.is_multiple_of(AVERAGE_EVERY) {
+            self.move_average();
+        }
         losses
+    }
+
+    /// One move of the averaged network toward the online one (see
+    /// [`TrainConfig::average_horizon`]): the `n`-th move weighs the online weights
+    /// `max(AVERAGE_EVERY / horizon, 1 / n)`; the first copies them.
+    fn move_average(&mut self) {
+        let n = self.updates / AVERAGE_EVERY;
+        let w = (AVERAGE_EVERY as f64 / self.average_horizon as f64).max(1.0 / n as f64);
+        let from = self.averaged.as_ref().unwrap_or(&self.plain);
+        let moved = from.blend_toward(&self.plain, w.min(1.0) as f32);
+        self.averaged = Some(moved.unwrap_or_else(|e| unreachable!("one architecture: {e}")));
     }
 
     /// The online network, moved out for line 15's Adam step, with the stale
@@ -879,6 +903,11 @@ impl Learner {
         };
         self.online.save_into(&mut store("online.bpk")).map_err(|e| format!("online.bpk: {e}"))?;
         self.target.save_into(&mut store("target.bpk")).map_err(|e| format!("target.bpk: {e}"))?;
+        if let Some(averaged) = &self.averaged {
+            averaged
+                .save_into(&mut store(AVERAGE_FILE))
+                .map_err(|e| format!("{AVERAGE_FILE}: {e}"))?;
+        }
         let optimizers = std::iter::once((OPTIMIZER_FILE, &self.optim))
             .chain(self.optim_aux.as_ref().map(|o| (AUX_OPTIMIZER_FILE, o)));
         for (name, optim) in optimizers {
@@ -908,6 +937,31 @@ impl Learner {
         let mut target = learner.net_config.init(&learner.device);
         read(&mut target, "target.bpk")?;
         learner.target = target;
+        let averaged = dir.join(AVERAGE_FILE);
+        let expected = config.average_horizon > 0 && updates >= AVERAGE_EVERY;
+        match (expected, averaged.exists()) {
+            (true, true) => {
+                let mut net = learner.net_config.init(&learner.device);
+                read(&mut net, AVERAGE_FILE)?;
+                learner.averaged = Some(net);
+            }
+            (true, false) => {
+                return Err(format!(
+                    "{}: missing, yet the run keeps an average of its weights \
+                     (train.average_horizon = {})",
+                    averaged.display(),
+                    config.average_horizon
+                ));
+            }
+            (false, true) => {
+                return Err(format!(
+                    "{}: an averaged network, yet the run's config keeps none \
+                     (train.average_horizon = 0)",
+                    averaged.display()
+                ));
+            }
+            (false, false) => {}
+        }
         let path = dir.join(OPTIMIZER_FILE);
         learner.optim =
             learner.optim.load(&path).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -973,9 +1027,10 @@ impl Learner {
         Some(stages.collect())
     }
 
-    /// The online network without autodiff (for evaluation and export).
+    /// The policy the run evaluates and ships, without autodiff: the averaged network where
+    /// the run keeps one (`train.average_horizon`), else the online network.
     pub fn policy_net(&self) -> QNet {
-        self.plain.clone()
+        self.averaged.as_ref().unwrap_or(&self.plain).clone()
     }
 }
 
@@ -984,6 +1039,47 @@ mod tests {
     use super::*;
     use crate::replay::{ReplayBuffer, Transition};
     use mdrlat_core::DEPTH_LEN;
+
+    /// Every float parameter of `net`, flattened in visiting order.
+    fn flat(net: &QNet) -> Vec<f32> {
+        use mdrlat_nn::burn::module::{ModuleVisitor, Param};
+        struct All(Vec<f32>);
+        impl ModuleVisitor for All {
+            fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+                self.0.extend(param.val().into_data().iter::<f32>());
+            }
+        }
+        let mut a = All(Vec::new());
+        net.visit(&mut a);
+        a.0
+    }
+
+    /// The averaged policy's arithmetic (`train.average_horizon` = 200, moves every 100
+    /// gradient steps): the first move copies the online weights, the second takes the mean
+    /// of the two snapshots (`w = max(100/200, 1/2)`), the third weighs the online weights
+    /// `max(1/2, 1/3)`; acting still uses the online network.
+    #[test]
+    fn the_averaged_policy_is_the_running_mean_then_the_exponential_average() {
+        let config = TrainConfig {
+            variant: Variant::LaserOnly,
+            average_horizon: 200,
+            ..TrainConfig::default()
+        };
+        let mut learner = Learner::new(&config, Task::Avoid, &Device::flex());
+        let mut snapshots = Vec::new();
+        for k in 0..300u64 {
+            learner.update(&crate::bench::random_batch(Variant::LaserOnly, 8, k));
+            if (k + 1) % AVERAGE_EVERY == 0 {
+                snapshots.push(flat(&learner.plain));
+            }
+        }
+        assert!(learner.averaged.is_some(), "an average after 100 gradient steps");
+        let (p1, p2, p3) = (&snapshots[0], &snapshots[1], &snapshots[2]);
+        let after_two: Vec<f32> = p1.iter().zip(p2).map(|(&a, &b)| a + 0.5 * (b - a)).collect();
+        let want: Vec<f32> = after_two.iter().zip(p3).map(|(&a, &b)| a + 0.5 * (b - a)).collect();
+        assert_eq!(flat(&learner.policy_net()), want);
+        assert_ne!(flat(&learner.policy_net()), *p3, "the policy is not the online network");
+    }
 
     /// The stacks a learner builds on its device from a batch's frames are the replay's own
     /// stacks, bit for bit — including millimetres above 32,767, which travel as negative

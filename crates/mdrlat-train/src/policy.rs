@@ -142,8 +142,9 @@ fn shown(path: &Path) -> String {
 }
 
 impl GreedyPolicy {
-    /// The online network of a run's checkpoint (`path`: a run directory or a checkpoint
-    /// folder), or a model file (`path`: a `.safetensors` file written by
+    /// The policy of a run's checkpoint (`path`: a run directory or a checkpoint folder): its
+    /// averaged network where the run keeps one (`train.average_horizon`), else its online
+    /// network; or a model file (`path`: a `.safetensors` file written by
     /// [`crate::export::save_safetensors_as`], f32 or f16, or a folder holding
     /// `model.safetensors` and no checkpoint), computing on `threads` CPU threads.
     ///
@@ -166,13 +167,20 @@ impl GreedyPolicy {
         let meta = read_meta(&dir).map_err(|e| e.to_string())?;
         let config = net_config(meta.variant, meta.task);
         let mut net = config.init(device);
-        read_net(&mut net, &dir.join("online.bpk"), meta.variant)?;
+        // A run that keeps an average of its weights acts by it (train.average_horizon).
+        let averaged = dir.join(crate::learner::AVERAGE_FILE);
+        let (file, which) = if averaged.is_file() {
+            (averaged, ", averaged network")
+        } else {
+            (dir.join("online.bpk"), "")
+        };
+        read_net(&mut net, &file, meta.variant)?;
         Self::from_net(
             config,
             net,
             device,
             threads,
-            format!("{} (step {})", shown(&dir), meta.step),
+            format!("{} (step {}{which})", shown(&dir), meta.step),
         )
     }
 

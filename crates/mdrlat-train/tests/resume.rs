@@ -403,3 +403,43 @@ fn a_run_without_a_final_checkpoint_leaves_none_and_says_so() {
     assert!(e.contains("no checkpoint"), "{e}");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Polyak averaging of the policy (`train.average_horizon`): the averaged network is in the
+/// checkpoint and resumes exactly; it is what the run's evaluations use and what a checkpoint
+/// loads as a policy; it is not the online network. A checkpoint whose averaging does not
+/// match the config is a clear error.
+#[test]
+fn a_run_with_an_averaged_policy_resumes_exactly() {
+    let dev = Device::flex();
+    // 300 steps from 50 transitions: 250 gradient steps, the average moved at 100 and 200.
+    let cfg = |steps| TrainConfig { average_horizon: 200, ..config(Variant::LaserOnly, steps) };
+    let straight = dir("avg-straight");
+    let (_, a) =
+        train(vec![world()], &sim(), &cfg(300), &dev, &straight, false, |_| {}).expect("run");
+    let cut = dir("avg-cut");
+    train(vec![world()], &sim(), &cfg(150), &dev, &cut, false, |_| {}).expect("run");
+    let (_, b) = train(vec![world()], &sim(), &cfg(300), &dev, &cut, true, |_| {}).expect("resume");
+    assert_eq!(probe(&a), probe(&b), "same online weights");
+    let bytes = |d: &Path, f: &str| std::fs::read(d.join("checkpoint").join(f)).expect(f);
+    assert_eq!(bytes(&straight, "average.bpk"), bytes(&cut, "average.bpk"), "same average");
+    assert_eq!(read(&straight, "eval.csv"), read(&cut, "eval.csv"));
+    assert_ne!(bytes(&straight, "average.bpk"), bytes(&straight, "online.bpk"));
+    // A checkpoint acts by its averaged network, and says so.
+    let policy =
+        mdrlat_train::GreedyPolicy::load(&straight.join("checkpoint"), &dev, 1).expect("policy");
+    assert!(policy.source().contains("averaged network"), "{}", policy.source());
+    // The averaged network is not the online one: their Q-values differ.
+    let laser: Vec<f32> = (0..4 * 512).map(|i| (i % 97) as f32 / 97.0).collect();
+    let q = policy.q_values(&Inputs { size: 1, laser, ..Inputs::default() }).expect("q");
+    assert_ne!(q, probe(&a));
+    // Resuming with the averaging switched off (or on, for a run without it) is refused.
+    let off = TrainConfig { average_horizon: 0, ..cfg(350) };
+    let e = train(vec![world()], &sim(), &off, &dev, &cut, true, |_| {}).expect_err("mismatch");
+    assert!(e.to_string().contains("average_horizon"), "{e}");
+    // A horizon shorter than the moves' spacing is a config error naming the key.
+    let short = TrainConfig { average_horizon: 50, ..cfg(300) };
+    assert!(short.validate().expect_err("short").to_string().contains("train.average_horizon"));
+    for d in [straight, cut] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}

@@ -204,7 +204,8 @@ pub fn run(a: &Args) -> Result<()> {
         .source()
         .split("(step ")
         .skip(1)
-        .filter_map(|s| s.split_once(')').map(|(step, _)| step.to_string()))
+        .map(|s| s.chars().take_while(char::is_ascii_digit).collect::<String>())
+        .filter(|step| !step.is_empty())
         .collect();
     let sources: Vec<String> = a.checkpoint.iter().map(|c| c.display().to_string()).collect();
     let mut extra = vec![("mdrlat_source", sources.join(", "))];
