@@ -79,6 +79,9 @@ enum Command {
     /// them in the unseen worlds, writes Table 2 beside the paper's numbers, Fig. 4 and a
     /// report. Resumable; runs here or on a Slurm cluster.
     Reproduce(cmd::reproduce::Args),
+    /// Compares a trained network's Q-values along its own greedy episodes with the returns
+    /// they earned; the reward's terms; the TD error by action.
+    Diagnose(cmd::diagnose::Args),
     /// Writes a trained run's network as a model folder to ship: model.safetensors (f16 by
     /// default) and a README with its Q-value difference to f32 and its success table.
     Export(cmd::export::Args),
@@ -181,6 +184,7 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Config(ConfigCommand::Check { file }) => config::check(&file),
         Command::Reproduce(a) => cmd::reproduce::run(&a),
         Command::Export(a) => cmd::export::run(&a),
+        Command::Diagnose(a) => cmd::diagnose::run(&a),
     }
 }
 

@@ -8,6 +8,7 @@ pub mod bench;
 pub mod checkpoint;
 pub mod collect;
 pub mod config;
+pub mod diagnose;
 pub mod error;
 pub mod evaluation;
 pub mod export;

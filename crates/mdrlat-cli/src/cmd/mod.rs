@@ -4,6 +4,7 @@ pub mod bench;
 pub mod bench_ros;
 pub mod bench_train;
 pub mod demo;
+pub mod diagnose;
 pub mod eval;
 pub mod export;
 pub mod observe;
