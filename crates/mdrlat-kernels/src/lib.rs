@@ -77,19 +77,25 @@ mod tests {
     }
 }
 
-#[cfg(test)]
-mod portable {
-    /// This crate's tests once more with `MDRLAT_PORTABLE_KERNELS=1`: on a machine with
-    /// AVX-512 the portable branches (the `gemm` crate's paths, the plain loops) never run
-    /// otherwise. The test binary runs its own tests in a child process.
-    #[test]
-    fn the_kernel_tests_pass_on_the_portable_kernels() {
+/// For the tests of this crate and of the crates built on it: rerun the calling test
+/// binary's tests on the portable kernels.
+#[doc(hidden)]
+pub mod testing {
+    /// Runs the current test binary again with `args` (test filters, `--skip …`) and
+    /// `MDRLAT_PORTABLE_KERNELS=1` (the portable paths forced), returning whether it passed
+    /// and what it printed. `None` when this already is such a run (or its child): nothing
+    /// to repeat.
+    ///
+    /// # Panics
+    /// The test binary cannot be found or started.
+    pub fn rerun_on_portable_kernels(args: &[&str]) -> Option<(bool, String)> {
         if crate::gemm::portable_forced() {
-            return; // already the portable run (or its child): nothing to repeat
+            return None;
         }
         let exe = std::env::current_exe().expect("the test binary's path");
         let out = std::process::Command::new(exe)
-            .args(["--skip", "portable::", "--nocapture"])
+            .args(args)
+            .arg("--nocapture")
             .env("MDRLAT_PORTABLE_KERNELS", "1")
             .env("MDRLAT_REQUIRE_AVX512", "0")
             .output()
@@ -99,7 +105,23 @@ mod portable {
             String::from_utf8_lossy(&out.stdout),
             String::from_utf8_lossy(&out.stderr)
         );
-        assert!(out.status.success(), "kernel tests on the portable kernels failed:\n{text}");
+        Some((out.status.success(), text))
+    }
+}
+
+#[cfg(test)]
+mod portable {
+    /// This crate's tests once more with `MDRLAT_PORTABLE_KERNELS=1`: on a machine with
+    /// AVX-512 the portable branches (the `gemm` crate's paths, the plain loops) never run
+    /// otherwise. The test binary runs its own tests in a child process.
+    #[test]
+    fn the_kernel_tests_pass_on_the_portable_kernels() {
+        let Some((passed, text)) =
+            crate::testing::rerun_on_portable_kernels(&["--skip", "portable::"])
+        else {
+            return; // already the portable run
+        };
+        assert!(passed, "kernel tests on the portable kernels failed:\n{text}");
         // The child ran the kernel tests, and the AVX-512-only ones said they were skipped.
         assert!(text.contains("test result: ok"), "{text}");
         #[cfg(target_arch = "x86_64")]

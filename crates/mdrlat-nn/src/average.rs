@@ -31,7 +31,15 @@ impl ModuleMapper for Replace {
 }
 
 impl QNet {
-    /// `self + w · (other − self)`, element-wise, in a copy of `self` (its parameter ids
+    /// Every float parameter's values, flattened in visiting order (a fingerprint of the
+    /// weights, for comparing networks).
+    pub fn flat_weights(&self) -> Vec<f32> {
+        let mut c = Collect(Vec::new());
+        self.visit(&mut c);
+        c.0.into_iter().flat_map(|(_, v)| v).collect()
+    }
+
+    /// `(1 − w) · self + w · other`, element-wise, in a copy of `self` (its parameter ids
     /// kept, new storage): one step of an exponential moving average of `other`'s weights
     /// (`w = 1` copies them). Both must have the same parameters with the same shapes.
     ///
@@ -53,7 +61,9 @@ impl QNet {
         let values: Vec<Vec<f32>> = mine
             .into_iter()
             .zip(theirs)
-            .map(|((_, a), (_, b))| a.iter().zip(&b).map(|(&a, &b)| a + w * (b - a)).collect())
+            .map(|((_, a), (_, b))| {
+                a.iter().zip(&b).map(|(&a, &b)| a * (1.0 - w) + b * w).collect()
+            })
             .collect();
         Ok(self.clone().map(&mut Replace(values.into_iter())))
     }
@@ -109,19 +119,9 @@ impl QNet {
 #[cfg(test)]
 mod tests {
     use crate::{QNet, QNetConfig, Variant};
-    use burn::module::{Module, ModuleVisitor, Param};
-    use burn::prelude::*;
 
     fn weights(net: &QNet) -> Vec<f32> {
-        struct All(Vec<f32>);
-        impl ModuleVisitor for All {
-            fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-                self.0.extend(param.val().into_data().iter::<f32>());
-            }
-        }
-        let mut a = All(Vec::new());
-        net.visit(&mut a);
-        a.0
+        net.flat_weights()
     }
 
     #[test]
@@ -145,13 +145,13 @@ mod tests {
         let err = QNet::average(&[&nets[0], &other]).expect_err("different variants");
         assert!(err.contains("not the same architecture"), "{err}");
         assert!(QNet::average(&[]).is_err());
-        // Blending: w = 1 copies, w = 0 keeps, between is a + w (b - a); ids stay the first's.
+        // Blending: w = 1 copies, w = 0 keeps, between is (1 - w) a + w b; ids stay the first's.
         let (a, b) = (&nets[0], &nets[1]);
         assert_eq!(weights(&a.blend_toward(b, 1.0).expect("copy")), w[1]);
         assert_eq!(weights(&a.blend_toward(b, 0.0).expect("keep")), w[0]);
         let quarter = weights(&a.blend_toward(b, 0.25).expect("blend"));
         for (i, q) in quarter.iter().enumerate() {
-            assert_eq!(*q, w[0][i] + 0.25 * (w[1][i] - w[0][i]), "weight {i}");
+            assert_eq!(*q, w[0][i] * 0.75 + w[1][i] * 0.25, "weight {i}");
         }
         assert!(a.blend_toward(&other, 0.5).is_err() && a.blend_toward(b, 1.5).is_err());
     }

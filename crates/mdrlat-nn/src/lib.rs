@@ -35,30 +35,17 @@ pub use burn;
 
 #[cfg(test)]
 mod portable {
-
     /// The host network's tests (against burn's autodiff) once more with
     /// `MDRLAT_PORTABLE_KERNELS=1`: on a machine with AVX-512 the network never runs on the
     /// portable kernels otherwise (`mdrlat-kernels` reruns its own tests so too). The test
     /// binary runs its own `host::` tests in a child process.
     #[test]
     fn the_host_tests_pass_on_the_portable_kernels() {
-        if mdrlat_kernels::gemm::portable_forced() {
-            return; // already the portable run (or its child): nothing to repeat
-        }
-        let exe = std::env::current_exe().expect("the test binary's path");
-        let out = std::process::Command::new(exe)
-            .args(["host::", "--nocapture"])
-            .env("MDRLAT_PORTABLE_KERNELS", "1")
-            .env("MDRLAT_REQUIRE_AVX512", "0")
-            .output()
-            .expect("run the test binary");
-        let text = format!(
-            "{}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert!(out.status.success(), "host tests on the portable kernels failed:\n{text}");
-        // The child ran the host tests.
+        let Some((passed, text)) = mdrlat_kernels::testing::rerun_on_portable_kernels(&["host::"])
+        else {
+            return; // already the portable run
+        };
+        assert!(passed, "host tests on the portable kernels failed:\n{text}");
         assert!(text.contains("test result: ok") && !text.contains("running 0 tests"), "{text}");
     }
 }

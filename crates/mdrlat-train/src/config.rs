@@ -68,7 +68,7 @@ pub struct TrainConfig {
     pub aux_optimizer: AuxOptimizer,
     /// Polyak averaging of the policy (0: off, the paper's): every [`AVERAGE_EVERY`]
     /// gradient steps the run's averaged network moves toward the online one,
-    /// `θ̄ ← θ̄ + w (θ − θ̄)` with `w = max(AVERAGE_EVERY / average_horizon, 1 / n)` at the
+    /// `θ̄ ← (1 − w) θ̄ + w θ` with `w = max(AVERAGE_EVERY / average_horizon, 1 / n)` at the
     /// `n`-th move (a plain mean of the online weights until the horizon is reached, then an
     /// exponential average over about `average_horizon` gradient steps). The averaged
     /// network is what the run's evaluations, learning curves and `model.safetensors` use

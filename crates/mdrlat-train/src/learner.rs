@@ -1040,20 +1040,6 @@ mod tests {
     use crate::replay::{ReplayBuffer, Transition};
     use mdrlat_core::DEPTH_LEN;
 
-    /// Every float parameter of `net`, flattened in visiting order.
-    fn flat(net: &QNet) -> Vec<f32> {
-        use mdrlat_nn::burn::module::{ModuleVisitor, Param};
-        struct All(Vec<f32>);
-        impl ModuleVisitor for All {
-            fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-                self.0.extend(param.val().into_data().iter::<f32>());
-            }
-        }
-        let mut a = All(Vec::new());
-        net.visit(&mut a);
-        a.0
-    }
-
     /// The averaged policy's arithmetic (`train.average_horizon` = 200, moves every 100
     /// gradient steps): the first move copies the online weights, the second takes the mean
     /// of the two snapshots (`w = max(100/200, 1/2)`), the third weighs the online weights
@@ -1070,15 +1056,19 @@ mod tests {
         for k in 0..300u64 {
             learner.update(&crate::bench::random_batch(Variant::LaserOnly, 8, k));
             if (k + 1) % AVERAGE_EVERY == 0 {
-                snapshots.push(flat(&learner.plain));
+                snapshots.push(learner.plain.flat_weights());
             }
         }
         assert!(learner.averaged.is_some(), "an average after 100 gradient steps");
         let (p1, p2, p3) = (&snapshots[0], &snapshots[1], &snapshots[2]);
-        let after_two: Vec<f32> = p1.iter().zip(p2).map(|(&a, &b)| a + 0.5 * (b - a)).collect();
-        let want: Vec<f32> = after_two.iter().zip(p3).map(|(&a, &b)| a + 0.5 * (b - a)).collect();
-        assert_eq!(flat(&learner.policy_net()), want);
-        assert_ne!(flat(&learner.policy_net()), *p3, "the policy is not the online network");
+        let after_two: Vec<f32> = p1.iter().zip(p2).map(|(&a, &b)| a * 0.5 + b * 0.5).collect();
+        let want: Vec<f32> = after_two.iter().zip(p3).map(|(&a, &b)| a * 0.5 + b * 0.5).collect();
+        assert_eq!(learner.policy_net().flat_weights(), want);
+        assert_ne!(
+            learner.policy_net().flat_weights(),
+            *p3,
+            "the policy is not the online network"
+        );
     }
 
     /// The stacks a learner builds on its device from a batch's frames are the replay's own

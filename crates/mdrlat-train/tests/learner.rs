@@ -3,7 +3,6 @@
 
 use mdrlat_core::{DEPTH_COLS, DEPTH_LEN, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, Rng};
 use mdrlat_nn::Variant;
-use mdrlat_nn::burn::module::{Module, ModuleVisitor, Param};
 use mdrlat_nn::burn::prelude::{Device, Tensor, TensorData};
 use mdrlat_sim::config::Task;
 use mdrlat_train::{AuxOptimizer, Batch, Learner, TrainConfig};
@@ -298,15 +297,7 @@ fn host_kernels_and_burn_autodiff_take_the_same_steps() {
 
 /// Every float parameter of a network, flattened, in visiting order.
 fn weights(net: &mdrlat_nn::QNet) -> Vec<f32> {
-    struct Collect(Vec<f32>);
-    impl ModuleVisitor for Collect {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            self.0.extend(param.val().into_data().iter::<f32>());
-        }
-    }
-    let mut c = Collect(Vec::new());
-    net.visit(&mut c);
-    c.0
+    net.flat_weights()
 }
 
 /// The paper's two Adam optimisers (section 3.1, "two Adam optimizers are used"; the authors'
