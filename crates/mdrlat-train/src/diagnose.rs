@@ -34,8 +34,9 @@ pub struct WorldDiagnosis {
     /// Mean `Q(s_t, a_t)` of the greedy action over every step.
     pub q_mean: f64,
     /// Mean discounted return `G_t = Σ_k γ^k r_{t+k}` from every step to its episode's end,
-    /// bootstrapped with the network's own `max_a Q(s_T, a)` where the 300 steps ran out (a
-    /// collision ends it with nothing after).
+    /// bootstrapped where the 300 steps ran out with the network's own max Q of the last
+    /// state it decided on (the state after the last step is never decided on); a collision
+    /// ends it with nothing after.
     pub return_mean: f64,
     /// Mean `Q(s_t, a_t)` over the last [`BEFORE_COLLISION`] steps of the episodes that
     /// ended in a collision (`NaN` without one).
@@ -47,7 +48,8 @@ pub struct WorldDiagnosis {
     pub terms: [f64; 4],
     /// Per Table 1 action: how often the greedy policy took it, and the mean absolute
     /// one-step TD error `|Q(s_t, a_t) − (r_t + γ (1 − collided) max_a Q(s_{t+1}, a))|` of
-    /// those steps, the network as its own target (`NaN` where never taken).
+    /// those steps, the network as its own target (`NaN` where never taken; an episode's
+    /// last step is left out unless it collided: `s_{t+1}` was never decided on).
     pub td_by_action: Vec<(u64, f64)>,
 }
 
@@ -140,20 +142,11 @@ pub fn diagnose_world(
         for (t, row) in outcome.rows.iter().enumerate() {
             let a = row.action.index();
             let q_taken = f64::from(qs[t][a]);
-            let next = if row.terminated {
-                0.0
-            } else if t + 1 < n {
-                max_q(&qs[t + 1])
-            } else {
-                max_q(&qs[t])
-            };
-            d.add_step(
-                a,
-                q_taken,
-                returns[t],
-                f64::from(row.reward) + gamma * next,
-                &row.info.reward_terms,
-            );
+            // The TD target needs Q(s_{t+1}): unknown after an episode's last step unless it
+            // ended in a collision (nothing follows); that step is left out of the TD error.
+            let next = if row.terminated { Some(0.0) } else { qs.get(t + 1).map(max_q) };
+            let target = next.map(|next| f64::from(row.reward) + gamma * next);
+            d.add_step(a, q_taken, returns[t], target, &row.info.reward_terms);
             if collided && t + BEFORE_COLLISION >= n {
                 d.before.0 += q_taken;
                 d.before.1 += returns[t];
@@ -173,6 +166,9 @@ struct Summer {
     g: f64,
     before: (f64, f64, u64),
     terms: [f64; 4],
+    /// Decisions per action.
+    actions: [u64; Action::COUNT],
+    /// Per action: steps with a TD target, and the sum of their |TD error|.
     td: [(u64, f64); Action::COUNT],
     collisions: u32,
 }
@@ -183,7 +179,7 @@ impl Summer {
         a: usize,
         q: f64,
         g: f64,
-        target: f64,
+        target: Option<f64>,
         r: &mdrlat_sim::reward::RewardTerms,
     ) {
         self.steps += 1;
@@ -192,8 +188,11 @@ impl Summer {
         for (sum, v) in self.terms.iter_mut().zip([drive, crash, r.r_d, r.r_w]) {
             *sum += f64::from(v);
         }
-        self.td[a].0 += 1;
-        self.td[a].1 += (q - target).abs();
+        self.actions[a] += 1;
+        if let Some(target) = target {
+            self.td[a].0 += 1;
+            self.td[a].1 += (q - target).abs();
+        }
     }
 
     fn finish(self, world: &str, episodes: u32) -> WorldDiagnosis {
@@ -208,7 +207,12 @@ impl Summer {
             q_before_collision: per(self.before.0, self.before.2),
             return_before_collision: per(self.before.1, self.before.2),
             terms: self.terms.map(|t| per(t, self.steps)),
-            td_by_action: self.td.iter().map(|&(n, sum)| (n, per(sum, n))).collect(),
+            td_by_action: self
+                .actions
+                .iter()
+                .zip(self.td)
+                .map(|(&taken, (n, sum))| (taken, per(sum, n)))
+                .collect(),
         }
     }
 }
