@@ -93,6 +93,12 @@ enum Command {
     /// Runs the simulator as a ROS 1 robot (turtlebot2 with RPLIDAR and Kinect): publishes
     /// laser, depth and odometry, moves from /cmd_vel.
     RosSim(cmd::ros::SimArgs),
+    /// The same node on ROS 2 (DDS, pure Rust): LaserScan, Image and Odometry in, Twist or
+    /// TwistStamped out, ROS_DOMAIN_ID honoured, the same safety rules.
+    Ros2(cmd::ros2::Args),
+    /// The simulator as a ROS 2 robot: publishes scan, depth and odometry as drivers do,
+    /// moves from /cmd_vel.
+    Ros2Sim(cmd::ros2::SimArgs),
     /// Measures performance.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -132,6 +138,9 @@ enum BenchCommand {
     /// Scan-in to Twist-out latency of `mdrlat ros` over a running ROS master (p50/p99),
     /// and inference time per decision on one core.
     Ros(cmd::bench_ros::RosArgs),
+    /// The same over ROS 2: scan-in to Twist-out latency of `mdrlat ros2` on a DDS domain
+    /// (p50/p99), and inference time per decision on one core.
+    Ros2(cmd::bench_ros::Ros2Args),
 }
 
 #[derive(Debug, Subcommand)]
@@ -174,9 +183,12 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Plot(a) => cmd::plot::run(&a),
         Command::Ros(a) => cmd::ros::run(&a),
         Command::RosSim(a) => cmd::ros::sim(&a),
+        Command::Ros2(a) => cmd::ros2::run(&a),
+        Command::Ros2Sim(a) => cmd::ros2::sim(&a),
         Command::Bench(BenchCommand::Sim(a)) => cmd::bench::sim(&a),
         Command::Bench(BenchCommand::Train(a)) => cmd::bench_train::run(&a),
         Command::Bench(BenchCommand::Ros(a)) => cmd::bench_ros::run(&a),
+        Command::Bench(BenchCommand::Ros2(a)) => cmd::bench_ros::run2(&a),
         Command::Config(ConfigCommand::Default) => {
             out!("{}", config::DEFAULT_TOML.trim_end());
             Ok(())

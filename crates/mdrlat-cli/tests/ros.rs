@@ -12,7 +12,10 @@ use std::io::{BufRead, BufReader, Write};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
+
+mod common;
+use common::{Guard, check_probe_report, kill, now_s, wait_exit};
 
 const BIN: &str = env!("CARGO_BIN_EXE_mdrlat");
 const PYTHON: &str = "/usr/bin/python3";
@@ -37,15 +40,6 @@ fn ros_available() -> bool {
 
 fn free_port() -> u16 {
     TcpListener::bind(("127.0.0.1", 0)).unwrap().local_addr().unwrap().port()
-}
-
-fn now_s() -> f64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).unwrap().as_secs_f64()
-}
-
-/// Sends `signal` to a process (or, with a negative id, a process group).
-fn kill(signal: &str, id: i64) {
-    let _ = Command::new("kill").arg(format!("-{signal}")).arg("--").arg(id.to_string()).status();
 }
 
 /// A `rosmaster` in its own session on a free port, stopped by process group on drop.
@@ -98,37 +92,10 @@ impl Drop for Master {
     }
 }
 
-/// A child process killed on drop (so a failing test leaves nothing running).
-struct Guard(Child);
-
-impl Drop for Guard {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 fn tmp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("mdrlat-ros-test-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir
-}
-
-fn wait_exit(child: &mut Child, within: Duration) -> std::process::ExitStatus {
-    let deadline = Instant::now() + within;
-    loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            return s;
-        }
-        assert!(Instant::now() < deadline, "process did not exit within {within:?}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-type Twist = (f64, f64, f64);
-
-fn moving(t: &Twist) -> bool {
-    t.1 != 0.0 || t.2 != 0.0
 }
 
 #[test]
@@ -173,69 +140,18 @@ fn node_rate_watchdog_malformed_messages_and_sigterm() {
     line.clear();
     out.read_line(&mut line).unwrap();
     let report: serde_json::Value = serde_json::from_str(&line).expect("probe JSON");
-    let twists: Vec<Twist> = report["twists"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|t| (t[0].as_f64().unwrap(), t[1].as_f64().unwrap(), t[2].as_f64().unwrap()))
-        .collect();
-    let phases: Vec<(String, f64, f64)> = report["phases"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| {
-            (
-                p["name"].as_str().unwrap().to_string(),
-                p["start"].as_f64().unwrap(),
-                p["end"].as_f64().unwrap(),
-            )
-        })
-        .collect();
-    let within = |from: f64, to: f64| -> Vec<Twist> {
-        twists.iter().copied().filter(|t| t.0 >= from && t.0 <= to).collect()
-    };
-    // 5 Hz ± 10 % over the first good phase.
-    let (_, s, e) = &phases[0];
-    let w = within(*s, *e);
-    let rate = (w.len() - 1) as f64 / (w.last().unwrap().0 - w[0].0);
-    assert!((4.5..=5.5).contains(&rate), "rate {rate:.2} Hz over {} twists", w.len());
-    for (name, start, end) in &phases {
-        match name.as_str() {
-            // Driving once fresh data has had a tick to arrive.
-            "good" | "depth-16uc1" => {
-                let w = within(start + 0.45, *end);
-                assert!(w.len() >= 3, "{name} at {start}: {} twists", w.len());
-                assert!(w.iter().all(moving), "{name} at {start}: a zero twist: {w:?}\n{log}");
-            }
-            // Stale after 0.5 s (+ one tick + margin).
-            "silent" => {
-                let w = within(start + 0.8, *end);
-                assert!(w.len() >= 2 && !w.iter().any(moving), "stale sensors: {w:?}");
-            }
-            // Malformed: zero from the next tick on.
-            _ => {
-                let w = within(start + 0.35, *end);
-                assert!(w.len() >= 3 && !w.iter().any(moving), "{name}: {w:?}\n{log}");
-            }
-        }
-    }
-    // SIGTERM: driving right before it, a zero after it, and the zero is the last word.
-    let before = within(sigterm_at - 0.5, sigterm_at);
-    assert!(before.len() >= 2 && before.iter().all(moving), "driving before SIGTERM: {before:?}");
-    let last = twists.last().unwrap();
-    assert!(last.0 >= sigterm_at && !moving(last), "last twist {last:?}, SIGTERM at {sigterm_at}");
-    // One log line per incident, not per tick: each malformed kind logged once.
-    for needle in [
-        "non-finite ranges (first: NaN",
-        "non-finite ranges (first: inf",
-        "data has 1228796 bytes",
-        "encoding \"rgb8\"",
-        "the image is 0x480",
-    ] {
-        assert_eq!(log.matches(needle).count(), 1, "{needle:?} in\n{log}");
-    }
-    assert_eq!(log.matches("laser scan is stale").count(), 1, "{log}");
-    assert!(log.contains("stopping: zero velocity sent"), "{log}");
+    check_probe_report(
+        &report,
+        sigterm_at,
+        &log,
+        &[
+            "non-finite ranges (first: NaN",
+            "non-finite ranges (first: inf",
+            "data has 1228796 bytes",
+            "encoding \"rgb8\"",
+            "the image is 0x480",
+        ],
+    );
     let csv = std::fs::read_to_string(dir.join("node.csv")).unwrap();
     assert!(csv.lines().count() > 50, "tick log");
     let _ = std::fs::remove_dir_all(dir);

@@ -6,8 +6,9 @@
 //! once when it ends, never once per tick; commands are clamped to Table 1's limits.
 
 use crate::convert::{ScanError, ScanOptions, convert_depth, resample_scan};
-use crate::msg::{Image, LaserScan, Odometry, WireError};
+use crate::msg::{Image, LaserScan, Odometry};
 use mdrlat_core::{Action, DEPTH_LEN, LASER_BEAMS, ODOM_HISTORY, Observation, Velocity};
+use std::fmt::Display;
 use std::time::{Duration, Instant};
 
 /// The policy the node runs: the one interface of `mdrlat-core`, fed the same
@@ -204,7 +205,11 @@ impl Controller {
     ///
     /// A first scan that does not cover the policy's 270° is a set-up error, not an incident:
     /// see [`Controller::fatal`].
-    pub fn on_scan(&mut self, now: Instant, msg: Result<&LaserScan, &WireError>) -> Option<String> {
+    pub fn on_scan(
+        &mut self,
+        now: Instant,
+        msg: Result<&LaserScan, &dyn Display>,
+    ) -> Option<String> {
         let result = match msg {
             Ok(scan) => match resample_scan(scan, self.config.scan, &mut self.scratch_scan) {
                 Ok(()) => {
@@ -230,7 +235,7 @@ impl Controller {
     }
 
     /// A depth image arrived (or failed to decode).
-    pub fn on_depth(&mut self, now: Instant, msg: Result<&Image, &WireError>) -> Option<String> {
+    pub fn on_depth(&mut self, now: Instant, msg: Result<&Image, &dyn Display>) -> Option<String> {
         let result = match msg {
             Ok(image) => convert_depth(image, &mut self.depth.frame).map_err(|e| e.to_string()),
             Err(e) => Err(format!("undecodable message: {e}")),
@@ -242,7 +247,11 @@ impl Controller {
     }
 
     /// Odometry arrived (or failed to decode).
-    pub fn on_odom(&mut self, now: Instant, msg: Result<&Odometry, &WireError>) -> Option<String> {
+    pub fn on_odom(
+        &mut self,
+        now: Instant,
+        msg: Result<&Odometry, &dyn Display>,
+    ) -> Option<String> {
         let result = match msg {
             Ok(o) => {
                 let (v, w) = (o.twist.linear.x, o.twist.angular.z);

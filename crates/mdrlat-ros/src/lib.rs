@@ -8,7 +8,8 @@
 //!   its 128 x 160 frame — the only sim-to-real step besides `mdrlat-core`'s normalisation,
 //!   which the simulator and this node share;
 //! - [`controller`]: frame stacks, the watchdog and the safety rules, free of transport;
-//! - [`run`]: the node's loop;
+//! - [`run`]: the node's loop over any middleware ([`Transport`]; [`Ros1`] here, ROS 2 in
+//!   `mdrlat-ros2`);
 //! - [`robot`]: the messages a turtlebot2 publishes, from plain readings (the simulator on
 //!   ROS 1, `mdrlat ros-sim`, sends its bridge's frames through it).
 //!
@@ -26,4 +27,4 @@ pub mod xmlrpc;
 pub use controller::{Command, Controller, ControllerConfig, Policy, Sensor};
 pub use convert::{NonFinite, ScanOptions};
 pub use node::{Node, Publisher, RosError};
-pub use run::{NodeConfig, RunSummary, Trigger, run};
+pub use run::{Handler, Incoming, NodeConfig, Ros1, RunSummary, Transport, Trigger, run};

@@ -49,6 +49,9 @@ pub enum RosError {
     /// The node's configuration cannot work.
     #[error("{0}")]
     Config(String),
+    /// Another middleware (ROS 2's DDS) refused: what was asked and why.
+    #[error("{0}")]
+    Middleware(String),
     /// A file (the CSV log) cannot be written.
     #[error("{}: {error}", path.display())]
     File {

@@ -1,8 +1,11 @@
-//! `mdrlat ros`: the policy node's main loop over a real ROS master.
+//! The policy node's main loop, the same on every middleware ([`Transport`]): ROS 1
+//! ([`Ros1`]) here, ROS 2 in `mdrlat-ros2`.
 
-use crate::controller::{Command, Controller, ControllerConfig, Policy};
-use crate::msg::{Image, LaserScan, Odometry, Twist};
-use crate::node::{Node, RosError, lock};
+use crate::controller::{Controller, ControllerConfig, Policy, Sensor};
+use crate::msg::{Image, LaserScan, Odometry, Twist, WireError};
+use crate::node::{Node, Publisher, RosError, lock};
+use mdrlat_core::Velocity;
+use std::fmt::Display;
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -20,15 +23,11 @@ pub enum Trigger {
     Scan,
 }
 
-/// Everything `mdrlat ros` is configured with besides the policy.
+/// Everything the policy node is configured with besides the policy and the middleware.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NodeConfig {
     /// Node name.
     pub name: String,
-    /// Master URI.
-    pub master: String,
-    /// The host peers reach this node at.
-    pub host: String,
     /// `sensor_msgs/LaserScan` input.
     pub scan_topic: String,
     /// `sensor_msgs/Image` depth input.
@@ -51,8 +50,6 @@ impl Default for NodeConfig {
     fn default() -> Self {
         Self {
             name: "/mdrlat".into(),
-            master: crate::node::master_from_env(),
-            host: crate::node::host_from_env(),
             scan_topic: "/scan".into(),
             depth_topic: "/camera/depth/image_raw".into(),
             odom_topic: "/odom".into(),
@@ -68,12 +65,117 @@ impl Default for NodeConfig {
 /// What a run did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RunSummary {
-    /// Twist messages published.
+    /// Velocity commands published.
     pub ticks: u64,
     /// Ticks where the policy drove.
     pub driving: u64,
     /// Seconds run.
     pub seconds: f64,
+}
+
+/// A sensor message as a transport received it: decoded, or why it could not be.
+#[derive(Clone, Copy)]
+pub enum Incoming<'a> {
+    /// A laser scan.
+    Scan(Result<&'a LaserScan, &'a dyn Display>),
+    /// A depth image.
+    Depth(Result<&'a Image, &'a dyn Display>),
+    /// Odometry.
+    Odom(Result<&'a Odometry, &'a dyn Display>),
+}
+
+/// Where a transport delivers sensor messages, from any of its threads.
+pub type Handler = Arc<dyn Fn(Incoming<'_>) + Send + Sync>;
+
+/// The middleware under the policy node: ROS 1 ([`Ros1`]) here, ROS 2 in `mdrlat-ros2`.
+/// Everything else — frame stacks, the watchdog, the safety rules, the control clock, the
+/// tick log — is [`run`]'s, the same on both.
+pub trait Transport {
+    /// Where the node runs, for its start-up line (e.g. `/mdrlat on http://host:11311/`).
+    fn describe(&self) -> String;
+    /// Subscribes to `sensor`'s `topic`: `handler` gets each message (or why it could not
+    /// be decoded) as it arrives, on any thread.
+    ///
+    /// # Errors
+    /// The middleware refuses.
+    fn subscribe(&mut self, sensor: Sensor, topic: &str, handler: Handler) -> Result<(), RosError>;
+    /// Makes `topic` the velocity command output.
+    ///
+    /// # Errors
+    /// The middleware refuses.
+    fn advertise(&mut self, topic: &str) -> Result<(), RosError>;
+    /// Sends one velocity command (never blocks for long: the control loop runs on).
+    fn publish(&mut self, velocity: Velocity);
+    /// Waits up to `within` until the last command has left for every subscriber; whether
+    /// it did.
+    fn flush(&mut self, within: Duration) -> bool;
+    /// Whether the middleware asked the node to stop.
+    fn shutdown_requested(&self) -> bool;
+    /// Leaves the graph.
+    fn shutdown(&mut self);
+}
+
+/// [`Transport`] on ROS 1: this crate's own XML-RPC and TCPROS.
+#[derive(Debug)]
+pub struct Ros1 {
+    node: Node,
+    cmd: Option<Publisher<Twist>>,
+}
+
+impl Ros1 {
+    /// A node called `name` on the master at `master`, reached by peers at `host`.
+    ///
+    /// # Errors
+    /// No socket, or the master cannot be reached.
+    pub fn connect(name: &str, master: &str, host: &str) -> Result<Self, RosError> {
+        Ok(Self { node: Node::new(name, master, host)?, cmd: None })
+    }
+}
+
+impl Transport for Ros1 {
+    fn describe(&self) -> String {
+        format!("{} on {}", self.node.name(), self.node.master())
+    }
+
+    fn subscribe(&mut self, sensor: Sensor, topic: &str, handler: Handler) -> Result<(), RosError> {
+        fn err(e: &WireError) -> &dyn Display {
+            e
+        }
+        match sensor {
+            Sensor::Laser => self.node.subscribe::<LaserScan>(topic, move |m| {
+                handler(Incoming::Scan(m.as_ref().map_err(err)));
+            }),
+            Sensor::Depth => self.node.subscribe::<Image>(topic, move |m| {
+                handler(Incoming::Depth(m.as_ref().map_err(err)));
+            }),
+            Sensor::Odom => self.node.subscribe::<Odometry>(topic, move |m| {
+                handler(Incoming::Odom(m.as_ref().map_err(err)));
+            }),
+        }
+    }
+
+    fn advertise(&mut self, topic: &str) -> Result<(), RosError> {
+        self.cmd = Some(self.node.advertise::<Twist>(topic, false)?);
+        Ok(())
+    }
+
+    fn publish(&mut self, velocity: Velocity) {
+        if let Some(cmd) = &self.cmd {
+            cmd.publish(&Twist::planar(f64::from(velocity.v), f64::from(velocity.w)));
+        }
+    }
+
+    fn flush(&mut self, within: Duration) -> bool {
+        self.cmd.as_ref().is_none_or(|c| c.flush(within))
+    }
+
+    fn shutdown_requested(&self) -> bool {
+        self.node.shutdown_requested()
+    }
+
+    fn shutdown(&mut self) {
+        self.node.shutdown();
+    }
 }
 
 /// Shared between the transport threads and the loop.
@@ -84,13 +186,16 @@ struct Shared {
     scan_arrived: Condvar,
 }
 
-/// Runs the node until `stop` is set (SIGINT/SIGTERM) or the master asks it to shut down;
-/// then publishes zero velocity, waits for it to leave, unregisters and returns.
-/// `log` receives one line per incident and the start-up lines.
+/// Runs the policy node on `transport` until `stop` is set (SIGINT/SIGTERM) or the
+/// middleware asks it to shut down; then publishes zero velocity, waits for it to leave,
+/// leaves the graph and returns. `log` receives one line per incident and the start-up
+/// lines, always from the calling thread.
 ///
 /// # Errors
-/// The master cannot be reached or refuses, or the CSV log cannot be written.
+/// The middleware refuses a subscription or the output, the CSV log cannot be written, or
+/// the first scan does not cover the policy's field of view.
 pub fn run(
+    transport: &mut dyn Transport,
     config: &NodeConfig,
     mut policy: Box<dyn Policy>,
     stop: &AtomicBool,
@@ -109,7 +214,7 @@ pub fn run(
         scans: Mutex::new(0),
         scan_arrived: Condvar::new(),
     });
-    // The log file first: a bad path fails before the node registers anywhere.
+    // The log file first: a bad path fails before the node appears on the graph.
     let mut csv = match &config.log_csv {
         Some(path) => {
             let io = |error| RosError::File { path: path.clone(), error };
@@ -119,62 +224,46 @@ pub fn run(
         }
         None => None,
     };
-    let node = Node::new(&config.name, &config.master, &config.host)?;
-    let cmd = node.advertise::<Twist>(&config.cmd_topic, false)?;
-    let log_line = |line: Option<String>| {
-        if let Some(l) = line {
-            log(&l);
-        }
-    };
+    transport.advertise(&config.cmd_topic)?;
     // Sensor callbacks log from transport threads; send their lines through a channel so
     // that the caller's `log` is only called from this thread.
     let (tx, rx) = std::sync::mpsc::channel::<String>();
-    if uses_laser {
-        let (s, tx) = (shared.clone(), tx.clone());
-        node.subscribe::<LaserScan>(&config.scan_topic, move |msg| {
+    let handler: Handler = {
+        let (s, tx) = (shared.clone(), Mutex::new(tx));
+        Arc::new(move |incoming: Incoming<'_>| {
             let arrived = Instant::now(); // before waiting for the lock
-            let line = lock(&s.controller).on_scan(arrived, msg.as_ref());
+            let mut c = lock(&s.controller);
+            let line = match incoming {
+                Incoming::Scan(m) => c.on_scan(arrived, m),
+                Incoming::Depth(m) => c.on_depth(arrived, m),
+                Incoming::Odom(m) => c.on_odom(arrived, m),
+            };
+            drop(c);
             if let Some(l) = line {
-                let _ = tx.send(l);
+                let _ = lock(&tx).send(l);
             }
-            *lock(&s.scans) += 1;
-            s.scan_arrived.notify_all();
-        })?;
-    }
-    if uses_depth {
-        let (s, tx) = (shared.clone(), tx.clone());
-        node.subscribe::<Image>(&config.depth_topic, move |msg| {
-            let arrived = Instant::now();
-            if let Some(l) = lock(&s.controller).on_depth(arrived, msg.as_ref()) {
-                let _ = tx.send(l);
+            if matches!(incoming, Incoming::Scan(_)) {
+                *lock(&s.scans) += 1;
+                s.scan_arrived.notify_all();
             }
-        })?;
-    }
-    if config.controller.require_odom {
-        let (s, tx) = (shared.clone(), tx.clone());
-        node.subscribe::<Odometry>(&config.odom_topic, move |msg| {
-            let arrived = Instant::now();
-            if let Some(l) = lock(&s.controller).on_odom(arrived, msg.as_ref()) {
-                let _ = tx.send(l);
-            }
-        })?;
-    }
-    drop(tx);
+        })
+    };
     let mut inputs = Vec::new();
-    if uses_laser {
-        inputs.push(config.scan_topic.as_str());
+    for (used, sensor, topic) in [
+        (uses_laser, Sensor::Laser, &config.scan_topic),
+        (uses_depth, Sensor::Depth, &config.depth_topic),
+        (config.controller.require_odom, Sensor::Odom, &config.odom_topic),
+    ] {
+        if used {
+            transport.subscribe(sensor, topic, handler.clone())?;
+            inputs.push(topic.as_str());
+        }
     }
-    if uses_depth {
-        inputs.push(config.depth_topic.as_str());
-    }
-    if config.controller.require_odom {
-        inputs.push(config.odom_topic.as_str());
-    }
+    drop(handler);
     let limits = lock(&shared.controller).config().clone();
     log(&format!(
-        "{} on {}: {} -> {} at {} Hz ({:?}), limits {:.2} m/s {:.2} rad/s, stale after {:.2} s",
-        node.name(),
-        node.master(),
+        "{}: {} -> {} at {} Hz ({:?}), limits {:.2} m/s {:.2} rad/s, stale after {:.2} s",
+        transport.describe(),
         inputs.join(", "),
         config.cmd_topic,
         config.rate_hz,
@@ -193,7 +282,7 @@ pub fn run(
     let watchdog = period.max(config.controller.stale_after + Duration::from_millis(10));
     let mut summary = RunSummary::default();
     let mut fatal = None;
-    while !stop.load(Ordering::SeqCst) && !node.shutdown_requested() {
+    while !stop.load(Ordering::SeqCst) && !transport.shutdown_requested() {
         if let Some(e) = lock(&shared.controller).fatal() {
             fatal = Some(e.to_string());
             break;
@@ -241,14 +330,14 @@ pub fn run(
         let now = Instant::now();
         last_tick = Some(now);
         let (command, lines) = lock(&shared.controller).tick(now, policy.as_mut());
-        publish(&cmd, command);
+        transport.publish(command.velocity);
         summary.ticks += 1;
         summary.driving += u64::from(command.action.is_some());
         while let Ok(line) = rx.try_recv() {
             log(&line);
         }
         for l in lines {
-            log_line(Some(l));
+            log(&l);
         }
         if let Some(f) = &mut csv {
             let odom = lock(&shared.controller).odom_velocity();
@@ -266,9 +355,9 @@ pub fn run(
         }
     }
     // Stop the robot before anything else, and make sure the zero leaves the socket.
-    publish(&cmd, Command { velocity: mdrlat_core::Velocity::default(), action: None });
+    transport.publish(Velocity::default());
     summary.ticks += 1;
-    let flushed = cmd.flush(Duration::from_millis(500));
+    let flushed = transport.flush(Duration::from_millis(500));
     if let Some(f) = &mut csv {
         let _ = f.flush();
     }
@@ -278,14 +367,10 @@ pub fn run(
         summary.ticks,
         summary.driving
     ));
-    node.shutdown();
+    transport.shutdown();
     summary.seconds = start.elapsed().as_secs_f64();
     match fatal {
         Some(e) => Err(RosError::Config(e)),
         None => Ok(summary),
     }
-}
-
-fn publish(publisher: &crate::node::Publisher<Twist>, command: Command) {
-    publisher.publish(&Twist::planar(f64::from(command.velocity.v), f64::from(command.velocity.w)));
 }

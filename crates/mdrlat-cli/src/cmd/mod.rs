@@ -13,6 +13,7 @@ pub mod render;
 pub mod reproduce;
 pub mod rollout;
 pub mod ros;
+pub mod ros2;
 pub mod train;
 pub mod worlds;
 

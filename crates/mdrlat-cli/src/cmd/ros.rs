@@ -78,9 +78,9 @@ pub enum TriggerKind {
     Scan,
 }
 
-/// Arguments of `mdrlat ros`.
+/// The policy node's arguments, the same for `mdrlat ros` and `mdrlat ros2`.
 #[derive(Debug, clap::Args)]
-pub struct Args {
+pub struct NodeArgs {
     /// The trained policy: a run directory (uses its checkpoint) or a checkpoint folder.
     #[arg(long, required_unless_present = "untrained", conflicts_with = "untrained")]
     pub checkpoint: Option<PathBuf>,
@@ -94,8 +94,6 @@ pub struct Args {
     /// Seed of --untrained.
     #[arg(long, default_value_t = 0, requires = "untrained")]
     pub seed: u64,
-    #[command(flatten)]
-    pub connection: Connection,
     /// Node name.
     #[arg(long, default_value = "/mdrlat")]
     pub name: String,
@@ -146,6 +144,15 @@ pub struct Args {
     pub bf16: bool,
 }
 
+/// Arguments of `mdrlat ros`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    pub connection: Connection,
+    #[command(flatten)]
+    pub node: NodeArgs,
+}
+
 /// SIGINT and SIGTERM set the returned flag (instead of killing the process), so a node can
 /// stop its robot before exiting.
 pub fn stop_flag() -> Result<Arc<AtomicBool>> {
@@ -157,16 +164,17 @@ pub fn stop_flag() -> Result<Arc<AtomicBool>> {
     Ok(stop)
 }
 
-fn log_line(line: &str) {
+/// One log line of a node (`tag`: `ros`, `ros2`), stamped with the wall clock.
+pub fn log_line(tag: &str, line: &str) {
     let t = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_secs_f64())
         .unwrap_or(0.0);
-    eprintln!("[mdrlat ros {t:.3}] {line}");
+    eprintln!("[mdrlat {tag} {t:.3}] {line}");
 }
 
-/// Builds the node configuration from `mdrlat ros` arguments.
-fn node_config(a: &Args) -> Result<NodeConfig> {
+/// Builds the node configuration from the policy node's arguments.
+fn node_config(a: &NodeArgs) -> Result<NodeConfig> {
     if !(a.rate_hz.is_finite() && a.rate_hz > 0.0 && a.rate_hz <= 100.0) {
         bail!("--rate-hz {}: expected a rate in (0, 100]", a.rate_hz);
     }
@@ -183,8 +191,6 @@ fn node_config(a: &Args) -> Result<NodeConfig> {
     }
     Ok(NodeConfig {
         name: a.name.clone(),
-        master: a.connection.master(),
-        host: a.connection.host(),
         scan_topic: a.topics.scan_topic.clone(),
         depth_topic: a.topics.depth_topic.clone(),
         odom_topic: a.topics.odom_topic.clone(),
@@ -214,6 +220,19 @@ fn node_config(a: &Args) -> Result<NodeConfig> {
 
 /// `mdrlat ros`.
 pub fn run(a: &Args) -> Result<()> {
+    run_node(&a.node, "ros", || {
+        Ok(mdrlat_ros::Ros1::connect(&a.node.name, &a.connection.master(), &a.connection.host())?)
+    })
+}
+
+/// Runs the policy node of `a` on the transport `connect` opens (`tag` names the command in
+/// log lines): the checks and the policy first, so a bad flag or checkpoint never reaches
+/// the middleware.
+pub fn run_node<T: mdrlat_ros::Transport>(
+    a: &NodeArgs,
+    tag: &str,
+    connect: impl FnOnce() -> Result<T>,
+) -> Result<()> {
     let config = node_config(a)?;
     if let Some(log) = &config.log_csv {
         ensure_parent(log)?;
@@ -240,7 +259,8 @@ pub fn run(a: &Args) -> Result<()> {
     if a.bf16 {
         policy = policy.with_bf16_weights().map_err(anyhow::Error::msg).context("--bf16")?;
     }
-    log_line(&format!(
+    let log = |line: &str| log_line(tag, line);
+    log(&format!(
         "policy: {} network, {} ({} on {} thread(s))",
         policy.variant(),
         policy.source(),
@@ -248,8 +268,9 @@ pub fn run(a: &Args) -> Result<()> {
         a.threads
     ));
     let stop = stop_flag()?;
-    let summary = mdrlat_ros::run(&config, Box::new(policy), &stop, &log_line)?;
-    log_line(&format!("exited after {:.1} s", summary.seconds));
+    let mut transport = connect()?;
+    let summary = mdrlat_ros::run(&mut transport, &config, Box::new(policy), &stop, &log)?;
+    log(&format!("exited after {:.1} s", summary.seconds));
     Ok(())
 }
 
@@ -273,9 +294,9 @@ impl From<DepthEncoding> for robot::DepthEncoding {
     }
 }
 
-/// Arguments of `mdrlat ros-sim`.
+/// The simulated robot's arguments, the same for `mdrlat ros-sim` and `mdrlat ros2-sim`.
 #[derive(Debug, clap::Args)]
-pub struct SimArgs {
+pub struct SimRobotArgs {
     /// World: a built-in name, a world .toml or a map_server .yaml.
     #[arg(long, default_value = "train")]
     pub world: String,
@@ -285,8 +306,6 @@ pub struct SimArgs {
     /// Configuration file (its [sim] table; see `mdrlat config default`).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    #[command(flatten)]
-    pub connection: Connection,
     /// Node name.
     #[arg(long, default_value = "/mdrlat_sim")]
     pub name: String,
@@ -317,8 +336,56 @@ pub struct SimArgs {
     pub picture: Option<PathBuf>,
 }
 
+/// Arguments of `mdrlat ros-sim`.
+#[derive(Debug, clap::Args)]
+pub struct SimArgs {
+    #[command(flatten)]
+    pub connection: Connection,
+    #[command(flatten)]
+    pub robot: SimRobotArgs,
+}
+
 /// `mdrlat ros-sim`: the simulator's bridge ([`mdrlat_sim::bridge`]) on ROS 1.
 pub fn sim(a: &SimArgs) -> Result<()> {
+    let r = &a.robot;
+    run_sim(r, "ros-sim", |stop| {
+        let node = mdrlat_ros::Node::new(&r.name, &a.connection.master(), &a.connection.host())?;
+        let last = Arc::new(Mutex::new(LastCommand::default()));
+        {
+            let last = last.clone();
+            node.subscribe::<Twist>(&r.topics.cmd_topic, move |msg| {
+                lock(&last).set(msg.map(|t| (t.linear.x, t.angular.z)).ok());
+            })?;
+        }
+        Ok(RosRobot {
+            scan: node.advertise::<LaserScan>(&r.topics.scan_topic, false)?,
+            depth: node.advertise::<Image>(&r.topics.depth_topic, false)?,
+            odom: node.advertise::<Odometry>(&r.topics.odom_topic, false)?,
+            encoding: r.depth_encoding.into(),
+            last,
+            node,
+            stop,
+        })
+    })
+}
+
+/// The simulated robot's side of a middleware: [`Transport`] plus what `run_sim` reports.
+pub trait SimRobot: Transport {
+    /// Where it runs, for the start-up line.
+    fn describe(&self) -> String;
+    /// Velocity commands that could not be decoded.
+    fn malformed(&self) -> u64;
+    /// Leaves the graph.
+    fn shutdown(&mut self);
+}
+
+/// Runs the simulator of `a` as a robot on the middleware `connect` opens (given the
+/// SIGINT/SIGTERM flag), `tag` naming the command in its lines.
+pub fn run_sim<T: SimRobot>(
+    a: &SimRobotArgs,
+    tag: &str,
+    connect: impl FnOnce(Arc<AtomicBool>) -> Result<T>,
+) -> Result<()> {
     let settings = BridgeSettings {
         seed: a.seed,
         cmd_timeout_s: a.cmd_timeout_s,
@@ -350,41 +417,19 @@ pub fn sim(a: &SimArgs) -> Result<()> {
             None => None,
         },
         picture: a.picture.is_some(),
+        tag: tag.to_string(),
         best: (0, None),
         scale: px_per_m(env.world(), 640.0),
     };
     let stop = stop_flag()?;
-    let node = mdrlat_ros::Node::new(&a.name, &a.connection.master(), &a.connection.host())?;
-    let last = Arc::new(Mutex::new(LastCommand::default()));
-    {
-        let last = last.clone();
-        node.subscribe::<Twist>(&a.topics.cmd_topic, move |msg| {
-            let mut l = last.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-            match msg {
-                Ok(t) => {
-                    l.received =
-                        Some(Received { v: t.linear.x, w: t.angular.z, at: Instant::now() })
-                }
-                Err(_) => l.malformed += 1,
-            }
-        })?;
-    }
-    let mut transport = RosRobot {
-        scan: node.advertise::<LaserScan>(&a.topics.scan_topic, false)?,
-        depth: node.advertise::<Image>(&a.topics.depth_topic, false)?,
-        odom: node.advertise::<Odometry>(&a.topics.odom_topic, false)?,
-        encoding: a.depth_encoding.into(),
-        last: last.clone(),
-        node: &node,
-        stop,
-    };
+    let mut transport = connect(stop)?;
     eprintln!(
-        "[mdrlat ros-sim] world {} on {}: publishing {}, {} ({}), {}; driving from {}",
+        "[mdrlat {tag}] world {} on {}: publishing {}, {} ({}), {}; driving from {}",
         env.world().name,
-        node.master(),
+        transport.describe(),
         a.topics.scan_topic,
         a.topics.depth_topic,
-        transport.encoding.name(),
+        robot::DepthEncoding::from(a.depth_encoding).name(),
         a.topics.odom_topic,
         a.topics.cmd_topic
     );
@@ -395,9 +440,10 @@ pub fn sim(a: &SimArgs) -> Result<()> {
     if let (Some(p), Some(image)) = (&a.picture, &seen.best.1) {
         image.save_png(p)?;
     }
-    let malformed = last.lock().map(|l| l.malformed).unwrap_or(0);
+    let malformed = transport.malformed();
     out!(
-        "{{\"ros_sim\":\"{}\",\"steps\":{},\"episodes\":{},\"collisions\":{},\"distance_m\":{:.3},\"malformed_cmd\":{malformed},\"seconds\":{:.2}}}",
+        "{{\"{}\":\"{}\",\"steps\":{},\"episodes\":{},\"collisions\":{},\"distance_m\":{:.3},\"malformed_cmd\":{malformed},\"seconds\":{:.2}}}",
+        tag.replace('-', "_"),
         env.world().name,
         summary.steps,
         summary.episodes,
@@ -405,43 +451,70 @@ pub fn sim(a: &SimArgs) -> Result<()> {
         summary.distance_m,
         summary.seconds
     );
-    node.shutdown();
+    transport.shutdown();
     Ok(())
 }
 
 /// The latest `/cmd_vel` and how many could not be decoded.
 #[derive(Debug, Default)]
-struct LastCommand {
+pub struct LastCommand {
     received: Option<Received>,
     malformed: u64,
 }
 
+impl LastCommand {
+    /// The latest command.
+    pub fn received(&self) -> Option<Received> {
+        self.received
+    }
+    /// Commands that could not be decoded.
+    pub fn malformed(&self) -> u64 {
+        self.malformed
+    }
+    /// Records one message: its (v, ω), or `None` if it could not be decoded.
+    pub fn set(&mut self, command: Option<(f64, f64)>) {
+        match command {
+            Some((v, w)) => self.received = Some(Received { v, w, at: Instant::now() }),
+            None => self.malformed += 1,
+        }
+    }
+}
+
+/// Locks `m`, also after a panic elsewhere poisoned it.
+pub fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// The readings of a bridge frame, as the robot model (`mdrlat_ros::robot`) takes them.
+pub fn readings<'a>(f: &SensorFrame<'a>) -> robot::Readings<'a> {
+    robot::Readings {
+        ranges: f.ranges,
+        range_max_m: f.range_max_m,
+        depth: f.depth,
+        pose: [f.pose.x, f.pose.y, f.pose.yaw],
+        velocity: [f.velocity.v, f.velocity.w],
+        scan_time_s: f.dt_s,
+        seq: f.seq,
+    }
+}
+
 /// The bridge's transport on ROS 1: the sensor topics out, `/cmd_vel` in.
-struct RosRobot<'a> {
+struct RosRobot {
     scan: mdrlat_ros::Publisher<LaserScan>,
     depth: mdrlat_ros::Publisher<Image>,
     odom: mdrlat_ros::Publisher<Odometry>,
     encoding: robot::DepthEncoding,
     last: Arc<Mutex<LastCommand>>,
-    node: &'a mdrlat_ros::Node,
+    node: mdrlat_ros::Node,
     stop: Arc<AtomicBool>,
 }
 
-impl Transport for RosRobot<'_> {
+impl Transport for RosRobot {
     fn latest_command(&mut self) -> Option<Received> {
-        self.last.lock().unwrap_or_else(std::sync::PoisonError::into_inner).received
+        lock(&self.last).received()
     }
     fn publish(&mut self, f: &SensorFrame<'_>) {
-        let readings = robot::Readings {
-            ranges: f.ranges,
-            range_max_m: f.range_max_m,
-            depth: f.depth,
-            pose: [f.pose.x, f.pose.y, f.pose.yaw],
-            velocity: [f.velocity.v, f.velocity.w],
-            scan_time_s: f.dt_s,
-            seq: f.seq,
-        };
-        let (scan, depth, odom) = robot::messages(&readings, self.encoding);
+        let (scan, depth, odom) = robot::messages(&readings(f), self.encoding);
         self.scan.publish(&scan);
         self.depth.publish(&depth);
         self.odom.publish(&odom);
@@ -451,11 +524,25 @@ impl Transport for RosRobot<'_> {
     }
 }
 
+impl SimRobot for RosRobot {
+    fn describe(&self) -> String {
+        self.node.master().to_string()
+    }
+    fn malformed(&self) -> u64 {
+        lock(&self.last).malformed()
+    }
+    fn shutdown(&mut self) {
+        self.node.shutdown();
+    }
+}
+
 /// The trajectory log (`--log`), the episode lines and the longest episode's picture
 /// (`--picture`).
 struct SimLog {
     csv: Option<(PathBuf, std::io::BufWriter<std::fs::File>)>,
     picture: bool,
+    /// The command, for log lines and captions (`ros-sim`, `ros2-sim`).
+    tag: String,
     /// The longest finished episode's steps and picture.
     best: (u32, Option<mdrlat_render::Image>),
     scale: f32,
@@ -489,19 +576,20 @@ impl BridgeObserver for SimLog {
         let (episode, info) = (s.episode, &s.info);
         match info.collision {
             Some(c) => eprintln!(
-                "[mdrlat ros-sim] episode {episode}: collision ({c:?}) after {} steps",
-                info.step
+                "[mdrlat {}] episode {episode}: collision ({c:?}) after {} steps",
+                self.tag, info.step
             ),
             None => {
                 eprintln!(
-                    "[mdrlat ros-sim] episode {episode}: time limit after {} steps",
-                    info.step
+                    "[mdrlat {}] episode {episode}: time limit after {} steps",
+                    self.tag, info.step
                 )
             }
         }
         if self.picture && info.step >= self.best.0 {
             let caption = format!(
-                "ros-sim {}: episode {episode}, {} steps{}",
+                "{} {}: episode {episode}, {} steps{}",
+                self.tag,
                 env.world().name,
                 info.step,
                 if info.collision.is_some() { ", collision" } else { "" }
@@ -515,7 +603,8 @@ impl BridgeObserver for SimLog {
         let running = env.episode_steps();
         if self.picture && (self.best.1.is_none() || running > self.best.0) {
             let caption = format!(
-                "ros-sim {}: episode {episode}, {running} steps (running)",
+                "{} {}: episode {episode}, {running} steps (running)",
+                self.tag,
                 env.world().name
             );
             self.best = (running, Some(snapshot(env, trail, &caption, false, self.scale)));

@@ -37,3 +37,118 @@ pub fn assert_clean_failure(o: &Output, needles: &[&str]) {
         assert!(e.contains(n), "stderr lacks '{n}': {e}");
     }
 }
+
+/// A child process killed on drop (so a failing test leaves nothing running).
+pub struct Guard(pub std::process::Child);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Sends `signal` to a process (or, with a negative id, a process group).
+pub fn kill(signal: &str, id: i64) {
+    let _ = Command::new("kill").arg(format!("-{signal}")).arg("--").arg(id.to_string()).status();
+}
+
+/// Waits for `child` to exit; panics after `within`.
+pub fn wait_exit(
+    child: &mut std::process::Child,
+    within: std::time::Duration,
+) -> std::process::ExitStatus {
+    let deadline = std::time::Instant::now() + within;
+    loop {
+        if let Some(s) = child.try_wait().expect("wait") {
+            return s;
+        }
+        assert!(std::time::Instant::now() < deadline, "process did not exit within {within:?}");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+/// Seconds since the epoch (the probes' clock).
+pub fn now_s() -> f64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).expect("clock").as_secs_f64()
+}
+
+/// A velocity command as a probe recorded it: (time, v, ω).
+pub type Twist = (f64, f64, f64);
+
+/// Whether a command moves the robot.
+pub fn moving(t: &Twist) -> bool {
+    t.1 != 0.0 || t.2 != 0.0
+}
+
+/// Checks a policy node against a probe's report (`tests/ros/probe.py`,
+/// `tests/ros2/probe.py`: scripted phases of good, silent and malformed sensor data and every
+/// command received): 5 Hz, driving on good data with commands from Table 1 only, zero when
+/// stale or malformed from the next tick on, zero after SIGTERM as the last word, and each
+/// incident logged once (`needles`: one line each in the node's `log`).
+pub fn check_probe_report(
+    report: &serde_json::Value,
+    sigterm_at: f64,
+    log: &str,
+    needles: &[&str],
+) {
+    let f = |v: &serde_json::Value| v.as_f64().expect("number");
+    let twists: Vec<Twist> = report["twists"]
+        .as_array()
+        .expect("twists")
+        .iter()
+        .map(|t| (f(&t[0]), f(&t[1]), f(&t[2])))
+        .collect();
+    let phases: Vec<(String, f64, f64)> = report["phases"]
+        .as_array()
+        .expect("phases")
+        .iter()
+        .map(|p| (p["name"].as_str().expect("name").to_string(), f(&p["start"]), f(&p["end"])))
+        .collect();
+    let within = |from: f64, to: f64| -> Vec<Twist> {
+        twists.iter().copied().filter(|t| t.0 >= from && t.0 <= to).collect()
+    };
+    // 5 Hz ± 10 % over the first good phase.
+    let (_, s, e) = &phases[0];
+    let w = within(*s, *e);
+    let rate = (w.len() - 1) as f64 / (w[w.len() - 1].0 - w[0].0);
+    assert!((4.5..=5.5).contains(&rate), "rate {rate:.2} Hz over {} twists", w.len());
+    // Every driving command is one of Table 1's ten actions.
+    for t in twists.iter().filter(|t| moving(t)) {
+        let known = mdrlat_core::TABLE_1
+            .iter()
+            .any(|a| (f64::from(a.v) - t.1).abs() < 1e-6 && (f64::from(a.w) - t.2).abs() < 1e-6);
+        assert!(known, "command {t:?} is not in Table 1");
+    }
+    for (name, start, end) in &phases {
+        match name.as_str() {
+            // Driving once fresh data has had a tick to arrive.
+            "good" | "depth-16uc1" => {
+                let w = within(start + 0.45, *end);
+                assert!(w.len() >= 3, "{name} at {start}: {} twists", w.len());
+                assert!(w.iter().all(moving), "{name} at {start}: a zero twist: {w:?}\n{log}");
+            }
+            // Stale after 0.5 s (+ one tick + margin).
+            "silent" => {
+                let w = within(start + 0.8, *end);
+                assert!(w.len() >= 2 && !w.iter().any(moving), "stale sensors: {w:?}");
+            }
+            // Malformed: zero from the next tick on.
+            _ => {
+                let w = within(start + 0.35, *end);
+                assert!(w.len() >= 3 && !w.iter().any(moving), "{name}: {w:?}\n{log}");
+            }
+        }
+    }
+    // SIGTERM: driving right before it, a zero after it, and the zero is the last word.
+    let before = within(sigterm_at - 0.5, sigterm_at);
+    assert!(before.len() >= 2 && before.iter().all(moving), "driving before SIGTERM: {before:?}");
+    let last = twists[twists.len() - 1];
+    assert!(last.0 >= sigterm_at && !moving(&last), "last twist {last:?}, SIGTERM at {sigterm_at}");
+    // One log line per incident, not per tick: each malformed kind logged once.
+    for needle in needles {
+        assert_eq!(log.matches(needle).count(), 1, "{needle:?} in\n{log}");
+    }
+    assert_eq!(log.matches("laser scan is stale").count(), 1, "{log}");
+    assert!(log.contains("stopping: zero velocity sent"), "{log}");
+}
