@@ -49,9 +49,19 @@ pub struct Args {
     pub node: NodeArgs,
 }
 
+/// Every topic and the node name must be ROS 2 names: checked before anything starts.
+fn check_names(name: &str, t: &super::ros::Topics) -> Result<()> {
+    mdrlat_ros2::node::node_name(name)?;
+    for topic in [&t.scan_topic, &t.depth_topic, &t.odom_topic, &t.cmd_topic] {
+        mdrlat_ros2::node::topic_name(topic)?;
+    }
+    Ok(())
+}
+
 /// `mdrlat ros2`.
 pub fn run(a: &Args) -> Result<()> {
     let domain = a.domain.id()?;
+    check_names(&a.node.name, &a.node.topics)?;
     run_node(&a.node, "ros2", || Ok(Ros2Node::new(&a.node.name, domain, a.domain.cmd_type())?))
 }
 
@@ -67,6 +77,7 @@ pub struct SimArgs {
 /// `mdrlat ros2-sim`: the simulator's bridge ([`mdrlat_sim::bridge`]) on ROS 2.
 pub fn sim(a: &SimArgs) -> Result<()> {
     let (r, domain) = (&a.robot, a.domain.id()?);
+    check_names(&r.name, &r.topics)?;
     run_sim(r, "ros2-sim", |stop| {
         let mut p = Participant::new(&r.name, domain)?;
         let last = Arc::new(Mutex::new(LastCommand::default()));

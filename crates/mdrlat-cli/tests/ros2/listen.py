@@ -33,6 +33,8 @@ end = time.time() + seconds
 while time.time() < end:
     for k, r in readers.items():
         for m in r.take(N=50):
+            if not hasattr(m, "header"):
+                continue  # an InvalidSample: a writer left
             heard[k]["count"] += 1
             if k == "scan":
                 heard[k]["last"] = {"n": len(m.ranges), "angle_max": m.angle_max,
@@ -43,6 +45,8 @@ while time.time() < end:
             else:
                 heard[k]["last"] = {"child": m.child_frame_id, "x": m.pose.pose.position.x}
     for info in graph.take(N=50):
+        if not hasattr(info, "node_entities_info_seq"):
+            continue
         for n in info.node_entities_info_seq:
             nodes.add("%s|%s|%d|%d" % (n.node_namespace, n.node_name, len(n.reader_gid_seq),
                                        len(n.writer_gid_seq)))

@@ -3,7 +3,7 @@
 Eclipse Cyclone DDS, and records its cmd_vel stream.
 
 Usage: probe.py DOMAIN [--stamped]. Publishes a synthetic robot at 10 Hz (LaserScan of 720
-beams over 270 degrees and 480x640 depth images with the sensor-data profile, reliable
+beams over 270 degrees and 240x320 depth images with the sensor-data profile, reliable
 odometry), phase by phase: good data, silence, each kind of malformed message followed by
 good data again. Listens to cmd_vel with a reliable subscription, as a base does. Prints
 PHASES_DONE, keeps the sensors fresh until stdin closes, then prints one JSON object: the
@@ -43,14 +43,19 @@ def listen():
     while not stop.is_set():
         ws.wait(duration(milliseconds=50))
         for m in cmd.take(N=100):
+            if not isinstance(m, TwistStamped if stamped else Twist):
+                continue  # an InvalidSample: the writer left (the node exited)
             t = m.twist if stamped else m
             twists.append((time.time(), t.linear.x, t.angular.z))
 
 
 threading.Thread(target=listen, daemon=True).start()
 
-GOOD_DEPTH = struct.pack("<%df" % (480 * 640), *([2.5] * (480 * 640)))
-GOOD_DEPTH_16 = struct.pack("<%dH" % (480 * 640), *([2500] * (480 * 640)))
+# 240x320: Python's binding serialises a 640x480 float image in ~0.1 s, too slow for 10 Hz
+# on a busy 2-core machine; the node area-resizes any size alike.
+H, W = 240, 320
+GOOD_DEPTH = struct.pack("<%df" % (H * W), *([2.5] * (H * W)))
+GOOD_DEPTH_16 = struct.pack("<%dH" % (H * W), *([2500] * (H * W)))
 
 
 def scan(kind):
@@ -67,9 +72,9 @@ def scan(kind):
 
 
 def depth(kind):
-    h, w, enc, step, data = 480, 640, "32FC1", 640 * 4, GOOD_DEPTH
+    h, w, enc, step, data = H, W, "32FC1", W * 4, GOOD_DEPTH
     if kind == "depth-16uc1":
-        enc, step, data = "16UC1", 640 * 2, GOOD_DEPTH_16
+        enc, step, data = "16UC1", W * 2, GOOD_DEPTH_16
     if kind == "depth-length":
         data = GOOD_DEPTH[:-4]
     if kind == "depth-encoding":
@@ -103,10 +108,12 @@ PHASES += [("depth-16uc1", 1.5)]
 phases = []
 for name, seconds in PHASES:
     start = time.time()
+    tick = start
     while time.time() < start + seconds:
         if name != "silent":
             publish(name)
-        time.sleep(0.1)
+        tick += 0.1  # a 10 Hz schedule, not 0.1 s after the work
+        time.sleep(max(0.0, tick - time.time()))
     phases.append({"name": name, "start": start, "end": time.time()})
 
 print("PHASES_DONE", flush=True)

@@ -162,7 +162,7 @@ RELIABLE = Qos(
 DISCOVERY = Qos(
     Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=100)),
     Policy.Durability.TransientLocal,
-    Policy.History.KeepLast(1),
+    Policy.History.KeepLast(16),
 )
 
 
