@@ -298,7 +298,7 @@ mod tests {
         let fast = Plan::new(Sweep::preset("fast").expect("fast"), &dir.join("fast"));
         let fast_job = fast.job("train/mdrlat-s0").expect("job").clone();
         let fast_argv = steps(&fast, &fast_job, 1).expect("fresh")[0].argv().join(" ");
-        assert!(fast_argv.contains("--preset fast") && fast_argv.contains("--world gen-0..64"));
+        assert!(fast_argv.contains("--preset fast") && fast_argv.contains("--world train"));
         // Killed before a checkpoint: the half-made run is cleared and started again.
         std::fs::create_dir_all(run.join("checkpoint")).expect("dir");
         std::fs::write(run.join("config.toml"), "").expect("file");

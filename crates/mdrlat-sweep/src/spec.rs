@@ -340,7 +340,7 @@ mod tests {
         assert_eq!(paper.train_preset, "paper");
         let fast = Sweep::preset("fast").expect("fast");
         assert_eq!((fast.variants.len(), fast.seeds.len()), (6, 3));
-        assert_eq!((fast.train_preset.as_str(), fast.world.as_str()), ("fast", "gen-0..64"));
+        assert_eq!((fast.train_preset.as_str(), fast.world.as_str()), ("fast", "train"));
         let mut bad = fast.clone();
         bad.train_preset = "quick".into();
         let e = bad.validate().expect_err("unknown train preset");

@@ -79,7 +79,7 @@ impl Preset {
         match (self, task) {
             (_, mdrlat_sim::config::Task::Nav) => "nav-train",
             (Preset::Paper, _) => "train",
-            (Preset::Fast, _) => "gen-0..64",
+            (Preset::Fast, _) => "train",
         }
     }
 }

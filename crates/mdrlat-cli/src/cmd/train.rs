@@ -65,7 +65,7 @@ pub struct Args {
     variant: Option<Variant>,
     /// World(s) to train in: a built-in name, a .toml world file, a map_server .yaml, a
     /// generated world gen-N, or several, comma-separated, with gen-A..B for gen-A to
-    /// gen-(B-1) (default: train, gen-0..64 with --preset fast; nav-train for --task nav)
+    /// gen-(B-1) (default: train; nav-train for --task nav)
     #[arg(long)]
     world: Option<String>,
     /// Settings to start from, below --config and --set: paper (the defaults) or fast
