@@ -271,3 +271,88 @@ fn ros2_bad_input_is_a_clear_error() {
     let o = run(&["ros2-sim", "--world", "nowhere", "--domain-id", &domain(3)], None);
     assert!(!o.status.success() && !common::stderr(&o).contains("panicked"));
 }
+
+/// Resident memory of a process, MB.
+fn rss_mb(pid: u32) -> f64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.split_whitespace().next()?.parse::<f64>().ok())
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+/// Garbage RTPS datagrams, 8 MB scans and 16 MB images, and a discovery flood on the node's
+/// domain (`tests/ros2/hostile.py`): the node keeps its 5 Hz command stream and its memory
+/// levels off.
+#[test]
+fn ros2_node_survives_hostile_peers() {
+    let Some(python) = cyclone_python() else { return };
+    let domain = domain(3);
+    let dir = common::tmp("ros2", "hostile");
+    let csv = dir.join("node.csv");
+    let mut node = Guard(
+        Command::new(BIN)
+            .args(["ros2", "--untrained", "--variant", "laser-only", "--domain-id", &domain])
+            .arg("--log")
+            .arg(&csv)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let attack_s = 16.0;
+    let hostile =
+        script(&python, "hostile.py").args([&domain, "16"]).stdout(Stdio::piped()).spawn().unwrap();
+    // Resident memory every second while the peers rage.
+    let mut rss = Vec::new();
+    let start = std::time::Instant::now();
+    while start.elapsed().as_secs_f64() < 3.0 + attack_s {
+        std::thread::sleep(Duration::from_secs(1));
+        rss.push(rss_mb(node.0.id()));
+    }
+    let report = hostile.wait_with_output().unwrap();
+    let report: serde_json::Value =
+        serde_json::from_slice(&report.stdout).expect("hostile.py JSON");
+    kill("TERM", i64::from(node.0.id()));
+    let status = wait_exit(&mut node.0, Duration::from_secs(5));
+    let log = stderr_of(&mut node.0);
+    assert!(status.success(), "the node must survive and exit 0 on SIGTERM: {status}\n{log}");
+    let (calm_end, end) = (report["calm_end"].as_f64().unwrap(), report["end"].as_f64().unwrap());
+    // The node's own clock: its tick log (seconds since it started) through the attack.
+    let ticks: Vec<f64> = std::fs::read_to_string(&csv)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    let (first, last) = (ticks[0], ticks[ticks.len() - 1]);
+    let gaps: Vec<f64> = ticks.windows(2).map(|w| w[1] - w[0]).collect();
+    let worst = gaps.iter().copied().fold(0.0, f64::max);
+    let rate = (ticks.len() - 1) as f64 / (last - first);
+    assert!((4.5..=5.5).contains(&rate), "tick rate {rate:.2} Hz\n{log}");
+    assert!(worst < 0.6, "a {worst:.2} s gap in the command stream\n{log}");
+    // The commands reached the well-behaved base through the attack.
+    let heard = report["twists"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| (calm_end..end).contains(&t[0].as_f64().unwrap()))
+        .count();
+    assert!(
+        heard as f64 >= 0.6 * 5.0 * (end - calm_end),
+        "{heard} commands heard in {:.1} s",
+        end - calm_end
+    );
+    // Memory: bounded by the subscriptions' history depth times the largest sample, so it
+    // levels off: the last third of the attack adds little.
+    let peak = rss.iter().copied().fold(0.0, f64::max);
+    let third = rss.len() / 3;
+    let (mid, late) = (rss[rss.len() - 1 - third], rss[rss.len() - 1]);
+    assert!(peak < 600.0, "resident memory peaked at {peak:.0} MB: {rss:?}");
+    assert!(late - mid < 64.0, "memory still growing late in the attack: {rss:?}");
+    eprintln!(
+        "hostile peers: {rate:.2} Hz, worst gap {worst:.2} s, {heard} commands heard, RSS {rss:?} MB"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -47,9 +47,10 @@ pub fn parse_domain(s: &str) -> Result<u16, String> {
 /// The QoS a topic is read or written with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Qos {
-    /// ROS 2's sensor-data profile: best effort, volatile, keep last 5. A best-effort
-    /// subscription matches best-effort and reliable publishers alike, so the node reads
-    /// every driver.
+    /// ROS 2's sensor-data profile: best effort, volatile (a best-effort subscription
+    /// matches best-effort and reliable publishers alike, so the node reads every driver);
+    /// keep last 5 for a publisher, as drivers do, but 1 for a subscription: the node uses
+    /// the newest sample only, and a peer sending oversized samples fills one slot, not five.
     SensorData,
     /// Reliable, volatile, keep last 10 (ROS 2's default profile): what a base's
     /// `cmd_vel` subscription asks for and what `odom` usually is.
@@ -57,12 +58,12 @@ pub enum Qos {
 }
 
 impl Qos {
-    fn profile(self) -> QosProfile {
+    fn profile(self, reading: bool) -> QosProfile {
         match self {
             Qos::SensorData => QosProfile::default()
                 .reliability(Reliability::BestEffort)
                 .durability(Durability::Volatile)
-                .history(History::KeepLast { depth: 5 }),
+                .history(History::KeepLast { depth: if reading { 1 } else { 5 } }),
             Qos::Reliable => QosProfile::default()
                 .reliability(Reliability::Reliable {
                     when_full: WhenFull::Wait(Duration::from_millis(20)),
@@ -161,7 +162,7 @@ impl Participant {
         let (pkg, ty) = M::TYPE;
         let t = self
             .node
-            .create_topic(&name, MessageTypeName::new(pkg, ty), &qos.profile())
+            .create_topic(&name, MessageTypeName::new(pkg, ty), &qos.profile(true))
             .map_err(|e| dds(&format!("topic {topic}"), e))?;
         let mut sub = self
             .node
@@ -207,7 +208,7 @@ impl Participant {
         let (pkg, ty) = M::TYPE;
         let t = self
             .node
-            .create_topic(&name, MessageTypeName::new(pkg, ty), &qos.profile())
+            .create_topic(&name, MessageTypeName::new(pkg, ty), &qos.profile(false))
             .map_err(|e| dds(&format!("topic {topic}"), e))?;
         self.node
             .create_publisher::<M>(&t, None)
