@@ -8,14 +8,13 @@
 
 #![allow(clippy::unwrap_used)]
 
-use std::io::{BufRead, BufReader, Write};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{Guard, check_probe_report, kill, now_s, wait_exit};
+use common::{Guard, check_probe_report, kill, run_probe, wait_exit};
 
 const BIN: &str = env!("CARGO_BIN_EXE_mdrlat");
 const PYTHON: &str = "/usr/bin/python3";
@@ -105,41 +104,13 @@ fn node_rate_watchdog_malformed_messages_and_sigterm() {
     }
     let master = Master::start();
     let dir = tmp("node");
-    let mut node = Guard(
-        master
-            .command(BIN)
-            .args(["ros", "--untrained", "--variant", "mdrlat", "--seed", "3"])
-            .arg("--log")
-            .arg(dir.join("node.csv"))
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap(),
-    );
-    let mut probe = Guard(
-        master
-            .command(PYTHON)
-            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros/probe.py"))
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .spawn()
-            .unwrap(),
-    );
-    let mut out = BufReader::new(probe.0.stdout.take().unwrap());
-    let mut line = String::new();
-    out.read_line(&mut line).unwrap();
-    assert_eq!(line.trim(), "PHASES_DONE", "probe failed");
-    std::thread::sleep(Duration::from_millis(600));
-    let sigterm_at = now_s();
-    kill("TERM", i64::from(node.0.id()));
-    let status = wait_exit(&mut node.0, Duration::from_secs(5));
-    assert!(status.success(), "SIGTERM must end the node with 0, got {status}");
-    let mut log = String::new();
-    std::io::Read::read_to_string(node.0.stderr.as_mut().unwrap(), &mut log).unwrap();
-    writeln!(probe.0.stdin.as_mut().unwrap()).unwrap();
-    line.clear();
-    out.read_line(&mut line).unwrap();
-    let report: serde_json::Value = serde_json::from_str(&line).expect("probe JSON");
+    let mut node = master.command(BIN);
+    node.args(["ros", "--untrained", "--variant", "mdrlat", "--seed", "3"])
+        .arg("--log")
+        .arg(dir.join("node.csv"));
+    let mut probe = master.command(PYTHON);
+    probe.arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/ros/probe.py"));
+    let (report, sigterm_at, log) = run_probe(node, probe);
     check_probe_report(
         &report,
         sigterm_at,

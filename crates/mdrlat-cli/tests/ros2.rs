@@ -11,14 +11,14 @@
 
 #![allow(clippy::unwrap_used)]
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::OnceLock;
 use std::time::Duration;
 
 mod common;
-use common::{Guard, check_probe_report, kill, now_s, wait_exit};
+use common::{Guard, check_probe_report, kill, run_probe, wait_exit};
 
 const BIN: &str = env!("CARGO_BIN_EXE_mdrlat");
 /// The Cyclone DDS binding's version the tests were written against.
@@ -89,39 +89,14 @@ fn ros2_node_rate_actions_watchdog_malformed_samples_and_sigterm() {
     let Some(python) = cyclone_python() else { return };
     let domain = domain(0);
     let dir = common::tmp("ros2", "node");
-    let mut node = Guard(
-        Command::new(BIN)
-            .args(["ros2", "--untrained", "--variant", "mdrlat", "--seed", "3"])
-            .env("ROS_DOMAIN_ID", &domain) // the variable, as a ROS 2 user sets it
-            .arg("--log")
-            .arg(dir.join("node.csv"))
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap(),
-    );
-    let mut probe = Guard(
-        script(&python, "probe.py")
-            .arg(&domain)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .spawn()
-            .unwrap(),
-    );
-    let mut out = BufReader::new(probe.0.stdout.take().unwrap());
-    let mut line = String::new();
-    out.read_line(&mut line).unwrap();
-    assert_eq!(line.trim(), "PHASES_DONE", "probe failed");
-    std::thread::sleep(Duration::from_millis(600));
-    let sigterm_at = now_s();
-    kill("TERM", i64::from(node.0.id()));
-    let status = wait_exit(&mut node.0, Duration::from_secs(5));
-    let log = stderr_of(&mut node.0);
-    assert!(status.success(), "SIGTERM must end the node with 0, got {status}\n{log}");
-    writeln!(probe.0.stdin.as_mut().unwrap()).unwrap();
-    line.clear();
-    out.read_line(&mut line).unwrap();
-    let report: serde_json::Value = serde_json::from_str(&line).expect("probe JSON");
+    let mut node = Command::new(BIN);
+    node.args(["ros2", "--untrained", "--variant", "mdrlat", "--seed", "3"])
+        .env("ROS_DOMAIN_ID", &domain) // the variable, as a ROS 2 user sets it
+        .arg("--log")
+        .arg(dir.join("node.csv"));
+    let mut probe = script(&python, "probe.py");
+    probe.arg(&domain);
+    let (report, sigterm_at, log) = run_probe(node, probe);
     check_probe_report(
         &report,
         sigterm_at,

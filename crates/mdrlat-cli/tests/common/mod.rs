@@ -152,3 +152,32 @@ pub fn check_probe_report(
     assert_eq!(log.matches("laser scan is stale").count(), 1, "{log}");
     assert!(log.contains("stopping: zero velocity sent"), "{log}");
 }
+
+/// Runs a policy node (`node`) against a probe (`probe`: `tests/ros/probe.py`,
+/// `tests/ros2/probe.py`) to the probe's `PHASES_DONE`, sends the node SIGTERM while the
+/// probe keeps its sensors fresh, and returns the probe's report, when SIGTERM was sent and
+/// the node's log. The node must exit 0.
+pub fn run_probe(mut node: Command, mut probe: Command) -> (serde_json::Value, f64, String) {
+    use std::io::{BufRead, Write};
+    use std::process::Stdio;
+    let mut node = Guard(node.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().expect("node"));
+    let mut probe =
+        Guard(probe.stdin(Stdio::piped()).stdout(Stdio::piped()).spawn().expect("probe"));
+    let mut out = std::io::BufReader::new(probe.0.stdout.take().expect("probe stdout"));
+    let mut line = String::new();
+    out.read_line(&mut line).expect("probe line");
+    assert_eq!(line.trim(), "PHASES_DONE", "probe failed");
+    std::thread::sleep(std::time::Duration::from_millis(600));
+    let sigterm_at = now_s();
+    kill("TERM", i64::from(node.0.id()));
+    let status = wait_exit(&mut node.0, std::time::Duration::from_secs(5));
+    let mut log = String::new();
+    std::io::Read::read_to_string(node.0.stderr.as_mut().expect("node stderr"), &mut log)
+        .expect("node log");
+    assert!(status.success(), "SIGTERM must end the node with 0, got {status}\n{log}");
+    writeln!(probe.0.stdin.as_mut().expect("probe stdin")).expect("probe stdin");
+    line.clear();
+    out.read_line(&mut line).expect("probe report");
+    let report = serde_json::from_str(&line).expect("probe JSON");
+    (report, sigterm_at, log)
+}
