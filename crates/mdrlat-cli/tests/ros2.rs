@@ -64,6 +64,14 @@ fn cyclone_python() -> Option<PathBuf> {
         .clone()
 }
 
+/// Held by the tests whose timing a CPU-heavy neighbour could upset (the probe's 5 Hz
+/// phases) and by the CPU-heavy one (the hostile peers): they never overlap.
+static TIMING: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn timing() -> std::sync::MutexGuard<'static, ()> {
+    TIMING.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// A DDS domain for one test of this process (`k` < 4): 4 per process, spread by PID over
 /// 1..=228.
 fn domain(k: u32) -> String {
@@ -87,6 +95,7 @@ fn stderr_of(child: &mut std::process::Child) -> String {
 #[test]
 fn ros2_node_rate_actions_watchdog_malformed_samples_and_sigterm() {
     let Some(python) = cyclone_python() else { return };
+    let _alone = timing();
     let domain = domain(0);
     let dir = common::tmp("ros2", "node");
     let mut node = Command::new(BIN);
@@ -263,6 +272,7 @@ fn rss_mb(pid: u32) -> f64 {
 #[test]
 fn ros2_node_survives_hostile_peers() {
     let Some(python) = cyclone_python() else { return };
+    let _alone = timing();
     let domain = domain(3);
     let dir = common::tmp("ros2", "hostile");
     let csv = dir.join("node.csv");
