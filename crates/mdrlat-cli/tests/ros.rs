@@ -307,16 +307,7 @@ fn bench_ros_reports_latency_as_json() {
         .arg("20")
         .output()
         .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
-    let lines: Vec<serde_json::Value> =
-        text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
-    assert_eq!(lines[0]["bench"], "ros");
-    assert_eq!(lines[0]["samples"], 10);
-    let (p50, p99) = (lines[0]["p50_ms"].as_f64().unwrap(), lines[0]["p99_ms"].as_f64().unwrap());
-    assert!(0.0 < p50 && p50 <= p99 && p99 < 1000.0, "{text}");
-    assert_eq!(lines[1]["bench"], "infer");
-    assert_eq!(lines[1]["threads"], 1);
+    common::check_bench_latency(&out, "ros");
 }
 
 #[test]

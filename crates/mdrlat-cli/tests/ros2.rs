@@ -220,15 +220,7 @@ fn bench_ros2_reports_latency_as_json() {
         .args(["--rate-hz", "20", "--domain-id", &domain(2)])
         .output()
         .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
-    let lines: Vec<serde_json::Value> =
-        text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
-    assert_eq!(lines[0]["bench"], "ros2");
-    assert_eq!(lines[0]["samples"], 10);
-    let (p50, p99) = (lines[0]["p50_ms"].as_f64().unwrap(), lines[0]["p99_ms"].as_f64().unwrap());
-    assert!(0.0 < p50 && p50 <= p99 && p99 < 1000.0, "{text}");
-    assert_eq!(lines[1]["bench"], "infer");
+    common::check_bench_latency(&out, "ros2");
 }
 
 #[test]

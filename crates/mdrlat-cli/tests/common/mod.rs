@@ -181,3 +181,19 @@ pub fn run_probe(mut node: Command, mut probe: Command) -> (serde_json::Value, f
     let report = serde_json::from_str(&line).expect("probe JSON");
     (report, sigterm_at, log)
 }
+
+/// Checks `mdrlat bench ros|ros2 --samples 10 --json`'s output: the latency line of `bench`
+/// (10 samples, 0 < p50 ≤ p99 < 1 s), then the one-thread inference line.
+pub fn check_bench_latency(out: &Output, bench: &str) {
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}{}", stderr(out));
+    let lines: Vec<serde_json::Value> =
+        text.lines().map(|l| serde_json::from_str(l).expect("a JSON line")).collect();
+    assert_eq!(lines[0]["bench"], bench);
+    assert_eq!(lines[0]["samples"], 10);
+    let ms = |k: &str| lines[0][k].as_f64().expect("milliseconds");
+    let (p50, p99) = (ms("p50_ms"), ms("p99_ms"));
+    assert!(0.0 < p50 && p50 <= p99 && p99 < 1000.0, "{text}");
+    assert_eq!(lines[1]["bench"], "infer");
+    assert_eq!(lines[1]["threads"], 1);
+}
