@@ -37,7 +37,8 @@ use crate::env::Observation;
 use crate::robot::RobotState;
 use crate::sensors::{DepthCamera, DepthGeometry, Laser};
 use mdrlat_core::{
-    Action, Decision, ODOM_HISTORY, Policy, PolicyError, Sensors, Velocity, decide_each,
+    Action, Decision, FRAME_STACK, ODOM_HISTORY, Policy, PolicyError, Sensors, Velocity,
+    decide_each,
 };
 use mdrlat_geom::{Pose2, Vec2};
 use std::collections::BTreeMap;
@@ -104,6 +105,23 @@ impl AvoidConfig {
             return Err("avoid: more than 1000 roll-out points or cells under 5 mm".into());
         }
         Ok(())
+    }
+}
+
+impl AvoidConfig {
+    /// `memory_steps` of `avoid-stack`: cells seen in the last [`FRAME_STACK`] frames only,
+    /// what a network's observation holds.
+    pub const STACK_MEMORY_STEPS: u32 = FRAME_STACK as u32 - 1;
+
+    /// The name of the avoider these settings make: `avoid`, `avoid-laser` (no camera),
+    /// `avoid-stack` (memory of the frame stack only), `avoid-laser-stack`.
+    pub fn name(&self) -> &'static str {
+        match (self.depth, self.memory_steps <= Self::STACK_MEMORY_STEPS) {
+            (true, false) => "avoid",
+            (false, false) => "avoid-laser",
+            (true, true) => "avoid-stack",
+            (false, true) => "avoid-laser-stack",
+        }
     }
 }
 
@@ -540,7 +558,7 @@ impl AvoidPolicy {
 
 impl Policy for AvoidPolicy {
     fn name(&self) -> String {
-        if self.config.depth { "avoid" } else { "avoid-laser" }.into()
+        self.config.name().into()
     }
     fn sensors(&self) -> Sensors {
         Sensors { laser: true, depth: self.config.depth }
@@ -605,5 +623,43 @@ mod tests {
         assert_eq!(drive(Scripted::AvoidLaser, true).0, seen, "avoid-laser read the camera");
         assert_eq!((sensors.laser, sensors.depth, name.as_str()), (true, false, "avoid-laser"));
         assert_ne!(drive(Scripted::Avoid, true).0, drive(Scripted::Avoid, false).0);
+    }
+
+    /// `avoid-stack` keeps only the cells seen in the last four frames (what a network's
+    /// frame stack holds); `avoid` remembers older ones. Names follow the settings.
+    #[test]
+    fn the_stack_avoider_forgets_what_the_frame_stack_does_not_hold() {
+        use crate::Env;
+        let world = mdrlat_world::builtin::get("furnished").expect("builtin").expect("valid");
+        let sim = SimConfig::default();
+        let oldest = |settings: AvoidConfig| {
+            let mut policy = AvoidPolicy::new(&sim, settings).expect("valid");
+            let mut env = Env::from_world(world.clone(), sim.clone()).expect("env");
+            let mut obs = env.reset(Some(3)).expect("reset").clone();
+            let mut oldest = 0;
+            for _ in 0..60 {
+                let a = mdrlat_core::decide_one(&mut policy, &obs, 0).expect("decides").action;
+                // The step of the decision just taken (`step` has moved on since).
+                let s = &policy.slots[0];
+                let age = s.cells.values().map(|c| s.step - 1 - c.seen).max().unwrap_or(0);
+                oldest = oldest.max(age);
+                let step = env.step(a).expect("step");
+                if step.terminated || step.truncated {
+                    break;
+                }
+                obs = step.observation.clone();
+            }
+            (oldest, policy.name())
+        };
+        let stack =
+            AvoidConfig { memory_steps: AvoidConfig::STACK_MEMORY_STEPS, ..AvoidConfig::default() };
+        let (age, name) = oldest(stack);
+        assert!(age <= AvoidConfig::STACK_MEMORY_STEPS, "avoid-stack kept a cell {age} steps old");
+        assert_eq!(name, "avoid-stack");
+        let (age, name) = oldest(AvoidConfig::default());
+        assert!(age > 10, "avoid remembers cells {age} steps old at most");
+        assert_eq!(name, "avoid");
+        let laser = AvoidConfig { depth: false, ..AvoidConfig::default() };
+        assert_eq!(laser.name(), "avoid-laser");
     }
 }

@@ -35,11 +35,15 @@ pub enum Scripted {
     /// The same avoider with the laser alone: what a policy that reads only the laser can
     /// achieve in a world (the yardstick of the laser-only networks).
     AvoidLaser,
+    /// The same avoider remembering only what a network's observation holds: costmap cells
+    /// seen in the last four frames (the frame stack), nothing older. Against `avoid`, what
+    /// the memory is worth in a world, so what a reactive policy can be asked for there.
+    AvoidStack,
 }
 
 impl Scripted {
     /// Every scripted policy, in the order of [`Scripted::name`]s listed in errors.
-    pub const ALL: [Scripted; 8] = [
+    pub const ALL: [Scripted; 9] = [
         Scripted::Random,
         Scripted::Forward,
         Scripted::Wander,
@@ -48,6 +52,7 @@ impl Scripted {
         Scripted::Circle,
         Scripted::Avoid,
         Scripted::AvoidLaser,
+        Scripted::AvoidStack,
     ];
 
     /// The name used on the command line and in reports.
@@ -61,6 +66,7 @@ impl Scripted {
             Scripted::Circle => "circle",
             Scripted::Avoid => "avoid",
             Scripted::AvoidLaser => "avoid-laser",
+            Scripted::AvoidStack => "avoid-stack",
         }
     }
 
@@ -81,7 +87,8 @@ impl Scripted {
             | Scripted::Wander
             | Scripted::WanderLaser
             | Scripted::Avoid
-            | Scripted::AvoidLaser => None,
+            | Scripted::AvoidLaser
+            | Scripted::AvoidStack => None,
         }
     }
 
@@ -103,9 +110,17 @@ impl Scripted {
                 config.robot.body_height_m,
             )),
             Scripted::WanderLaser => Box::new(WanderPolicy::new(laser.angles())),
-            Scripted::Avoid | Scripted::AvoidLaser => {
-                let settings =
-                    crate::AvoidConfig { depth: self == Scripted::Avoid, ..Default::default() };
+            Scripted::Avoid | Scripted::AvoidLaser | Scripted::AvoidStack => {
+                let memory_steps = if self == Scripted::AvoidStack {
+                    crate::AvoidConfig::STACK_MEMORY_STEPS
+                } else {
+                    crate::AvoidConfig::default().memory_steps
+                };
+                let settings = crate::AvoidConfig {
+                    depth: self != Scripted::AvoidLaser,
+                    memory_steps,
+                    ..Default::default()
+                };
                 Box::new(
                     crate::AvoidPolicy::new(config, settings)
                         .unwrap_or_else(|e| unreachable!("the default settings are valid: {e}")),

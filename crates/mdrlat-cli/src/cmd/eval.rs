@@ -28,9 +28,10 @@ pub struct Args {
     #[arg(long, value_name = "RUN_DIR", conflicts_with = "policy")]
     checkpoint: Option<PathBuf>,
     /// A policy that needs no training instead: random, forward, wander, wander-laser, spin,
-    /// circle, avoid or avoid-laser (`wander` and the classical `avoid` are the non-learned
-    /// baseline rows; `avoid-laser`, the avoider on the laser alone, is the laser-only rows' one
-    /// beside the six methods; `spin` and `circle` game the paper's success, never the moving
+    /// circle, avoid, avoid-laser or avoid-stack (`wander` and the classical `avoid` are the
+    /// non-learned baseline rows; `avoid-laser`, the avoider on the laser alone, is the
+    /// laser-only rows' one beside the six methods; `avoid-stack` remembers only the last
+    /// four frames, what a network sees; `spin` and `circle` game the paper's success, never the moving
     /// one); with `--task nav`, `planner` (the paper's move_base: A* on a laser-plane map of
     /// the world + DWA) or `planner-body` (its map holds everything the body can hit).
     #[arg(long, value_parser = super::parse_policy)]

@@ -43,7 +43,8 @@ pub struct Args {
     /// Consecutive episodes (the random streams continue from one to the next).
     #[arg(long, default_value_t = 1)]
     episodes: u32,
-    /// Who drives: random, forward, wander, wander-laser, spin, circle, avoid or avoid-laser; with
+    /// Who drives: random, forward, wander, wander-laser, spin, circle, avoid, avoid-laser or
+    /// avoid-stack; with
     /// `--task nav` also planner or planner-body (A* + DWA, see `mdrlat eval`).
     #[arg(long, default_value = "random", value_parser = super::parse_policy)]
     policy: super::PolicyArg,
