@@ -5,9 +5,10 @@
 //! The binding (`cyclonedds` from PyPI, a wheel with the C library inside) is installed into
 //! a virtual environment under the target folder on first use. Without Python's `venv` or
 //! PyPI these tests print why and pass, unless `MDRLAT_REQUIRE_ROS2=1` (set by `.ci/run`)
-//! makes that a failure. Every test runs on a DDS domain of its own, derived from the
-//! process id, so two runs (or two tests) never see each other; every process started is
-//! stopped by its PID.
+//! makes that a failure. Every test runs on a DDS domain of its own (held by a lock file,
+//! so two tests or two runs on one machine never see each other); every process started is
+//! stopped by its PID. DDS discovery is multicast on every interface: run these tests where
+//! no robot on the same network listens on domains 1–228.
 
 #![allow(clippy::unwrap_used)]
 
@@ -72,10 +73,60 @@ fn timing() -> std::sync::MutexGuard<'static, ()> {
     TIMING.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-/// A DDS domain for one test of this process (`k` < 4): 4 per process, spread by PID over
-/// 1..=228.
-fn domain(k: u32) -> String {
-    (1 + (std::process::id() % 57) * 4 + k).to_string()
+/// A DDS domain id held by one test: the first of 1..=228 that no other test holds, from a
+/// start picked by the PID; a locked file in the temp folder marks it taken, so two tests,
+/// or two test runs on one machine, never share one. Freed when dropped.
+struct Domain {
+    id: String,
+    _lock: std::fs::File,
+}
+
+fn domain() -> Domain {
+    let dir = std::env::temp_dir().join("mdrlat-ros2-domains");
+    std::fs::create_dir_all(&dir).unwrap();
+    let start = std::process::id() % 228;
+    for i in 0..228 {
+        let id = 1 + (start + i) % 228;
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(dir.join(format!("{id}.lock")))
+            .unwrap();
+        if file.try_lock().is_ok() {
+            return Domain { id: id.to_string(), _lock: file };
+        }
+    }
+    panic!("no free ROS 2 domain id in 1..=228 (lock files in {})", dir.display());
+}
+
+impl std::ops::Deref for Domain {
+    type Target = str;
+    fn deref(&self) -> &str {
+        &self.id
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for Domain {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.id.as_ref()
+    }
+}
+
+impl std::fmt::Display for Domain {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.id)
+    }
+}
+
+/// What a helper script printed, once it exits (killed by its PID if it has not within
+/// `within`: the `Guard`).
+fn output_of(script: &mut Guard, within: Duration) -> Vec<u8> {
+    let status = wait_exit(&mut script.0, within);
+    let mut out = Vec::new();
+    std::io::Read::read_to_end(script.0.stdout.as_mut().unwrap(), &mut out).unwrap();
+    assert!(status.success(), "helper script: {status}");
+    out
 }
 
 /// A script of `tests/ros2/` run by the Cyclone Python.
@@ -96,7 +147,7 @@ fn stderr_of(child: &mut std::process::Child) -> String {
 fn ros2_node_rate_actions_watchdog_malformed_samples_and_sigterm() {
     let Some(python) = cyclone_python() else { return };
     let _alone = timing();
-    let domain = domain(0);
+    let domain = domain();
     let dir = common::tmp("ros2", "node");
     let mut node = Command::new(BIN);
     node.args(["ros2", "--untrained", "--variant", "mdrlat", "--seed", "3"])
@@ -130,7 +181,7 @@ fn ros2_node_rate_actions_watchdog_malformed_samples_and_sigterm() {
 #[test]
 fn ros2_policy_drives_the_simulator() {
     let Some(python) = cyclone_python() else { return };
-    let domain = domain(1);
+    let domain = domain();
     let dir = common::tmp("ros2", "e2e");
     let traj = dir.join("trajectory.csv");
     let mut sim = Guard(
@@ -149,7 +200,9 @@ fn ros2_policy_drives_the_simulator() {
     let mut first = String::new();
     sim_err.read_line(&mut first).unwrap();
     assert!(first.contains(&format!("on ROS 2 domain {domain}")), "{first}");
-    let listen = script(&python, "listen.py").args([&domain, "6"]).stdout(Stdio::piped()).spawn();
+    let mut listen = Guard(
+        script(&python, "listen.py").args([&domain, "6"]).stdout(Stdio::piped()).spawn().unwrap(),
+    );
     let mut node = Guard(
         Command::new(BIN)
             .args(["ros2", "--untrained", "--variant", "multi", "--seed", "5", "--stamped"])
@@ -159,9 +212,9 @@ fn ros2_policy_drives_the_simulator() {
             .spawn()
             .unwrap(),
     );
-    let heard = listen.unwrap().wait_with_output().unwrap();
+    let heard = output_of(&mut listen, Duration::from_secs(30));
     let heard: serde_json::Value =
-        serde_json::from_slice(&heard.stdout).expect("listen.py JSON (did Cyclone decode?)");
+        serde_json::from_slice(&heard).expect("listen.py JSON (did Cyclone decode?)");
     for topic in ["scan", "depth", "odom"] {
         assert!(heard[topic]["count"].as_u64().unwrap() >= 10, "{heard}");
     }
@@ -217,7 +270,7 @@ fn bench_ros2_reports_latency_as_json() {
     // Needs no Python: both ends are this binary, on a domain of its own.
     let out = Command::new(BIN)
         .args(["bench", "ros2", "--variant", "laser-only", "--samples", "10", "--json"])
-        .args(["--rate-hz", "20", "--domain-id", &domain(2)])
+        .args(["--rate-hz", "20", "--domain-id", &domain()])
         .output()
         .unwrap();
     common::check_bench_latency(&out, "ros2");
@@ -233,18 +286,17 @@ fn ros2_bad_input_is_a_clear_error() {
         }
         c.output().unwrap()
     };
+    let domain = domain();
     let o = run(&["ros2", "--untrained"], Some("500"));
     common::assert_clean_failure(&o, &["ROS_DOMAIN_ID=500", "0..=232"]);
     let o = run(&["ros2", "--untrained", "--domain-id", "233"], None);
     assert!(!o.status.success() && common::stderr(&o).contains("0..=232"));
-    let o = run(
-        &["ros2", "--untrained", "--scan-topic", "/bad topic", "--domain-id", &domain(3)],
-        None,
-    );
+    let o =
+        run(&["ros2", "--untrained", "--scan-topic", "/bad topic", "--domain-id", &domain], None);
     common::assert_clean_failure(&o, &["\"/bad topic\"", "not a ROS 2 name"]);
-    let o = run(&["ros2", "--checkpoint", "/nonexistent/run", "--domain-id", &domain(3)], None);
+    let o = run(&["ros2", "--checkpoint", "/nonexistent/run", "--domain-id", &domain], None);
     common::assert_clean_failure(&o, &["/nonexistent/run: no such run directory or checkpoint"]);
-    let o = run(&["ros2-sim", "--world", "nowhere", "--domain-id", &domain(3)], None);
+    let o = run(&["ros2-sim", "--world", "nowhere", "--domain-id", &domain], None);
     assert!(!o.status.success() && !common::stderr(&o).contains("panicked"));
 }
 
@@ -258,19 +310,20 @@ fn rss_mb(pid: u32) -> f64 {
         .map_or(0.0, |kb| kb / 1024.0)
 }
 
-/// Garbage RTPS datagrams, 8 MB scans and 16 MB images, and a discovery flood on the node's
-/// domain (`tests/ros2/hostile.py`): the node keeps its 5 Hz command stream and its memory
-/// levels off.
+/// Garbage RTPS datagrams, fragment bombs (1 kB datagrams announcing 256 MB samples to the
+/// builtin readers), 8 MB scans and 16 MB images, and a discovery flood on the node's domain
+/// (`tests/ros2/hostile.py`), against the MDRLAT node (laser and depth subscriptions): it
+/// keeps its 5 Hz command stream and its memory levels off.
 #[test]
 fn ros2_node_survives_hostile_peers() {
     let Some(python) = cyclone_python() else { return };
     let _alone = timing();
-    let domain = domain(3);
+    let domain = domain();
     let dir = common::tmp("ros2", "hostile");
     let csv = dir.join("node.csv");
     let mut node = Guard(
         Command::new(BIN)
-            .args(["ros2", "--untrained", "--variant", "laser-only", "--domain-id", &domain])
+            .args(["ros2", "--untrained", "--variant", "mdrlat", "--domain-id", &domain])
             .arg("--log")
             .arg(&csv)
             .stdout(Stdio::null())
@@ -279,8 +332,9 @@ fn ros2_node_survives_hostile_peers() {
             .unwrap(),
     );
     let attack_s = 16.0;
-    let hostile =
-        script(&python, "hostile.py").args([&domain, "16"]).stdout(Stdio::piped()).spawn().unwrap();
+    let mut hostile = Guard(
+        script(&python, "hostile.py").args([&domain, "16"]).stdout(Stdio::piped()).spawn().unwrap(),
+    );
     // Resident memory every second while the peers rage.
     let mut rss = Vec::new();
     let start = std::time::Instant::now();
@@ -288,9 +342,8 @@ fn ros2_node_survives_hostile_peers() {
         std::thread::sleep(Duration::from_secs(1));
         rss.push(rss_mb(node.0.id()));
     }
-    let report = hostile.wait_with_output().unwrap();
-    let report: serde_json::Value =
-        serde_json::from_slice(&report.stdout).expect("hostile.py JSON");
+    let report = output_of(&mut hostile, Duration::from_secs(30));
+    let report: serde_json::Value = serde_json::from_slice(&report).expect("hostile.py JSON");
     kill("TERM", i64::from(node.0.id()));
     let status = wait_exit(&mut node.0, Duration::from_secs(5));
     let log = stderr_of(&mut node.0);

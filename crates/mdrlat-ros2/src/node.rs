@@ -220,6 +220,11 @@ impl Participant {
         topic_name(topic).map_or(0, |n| self.node.subscription_count(&n.to_string()))
     }
 
+    /// Subscriptions matched with one of this participant's publishers.
+    pub fn matched<M: serde::Serialize>(&self, publisher: &Publisher<M>) -> usize {
+        publisher.get_subscription_count(&self.node)
+    }
+
     /// Publishers on `topic` discovered on the domain.
     pub fn publishers(&self, topic: &str) -> usize {
         topic_name(topic).map_or(0, |n| self.node.publisher_count(&n.to_string()))

