@@ -28,8 +28,8 @@ pub enum Executor {
 pub struct Args {
     /// A built-in sweep: paper (6 variants x 5 seeds x 400k steps), cpu-small (a few hours
     /// on 2 cores), smoke (minutes), nav (the navigation experiment) or fast (6 variants x 3
-    /// seeds of mdrlat's own recipe on generated worlds). Without --preset or --sweep, the
-    /// sweep already in --out is continued.
+    /// seeds x 100k steps of mdrlat's own recipe, `train --preset fast`). Without --preset or
+    /// --sweep, the sweep already in --out is continued.
     #[arg(long, conflicts_with = "sweep")]
     preset: Option<String>,
     /// A sweep file of your own (see `--print paper` for every key).
