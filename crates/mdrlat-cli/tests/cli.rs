@@ -403,7 +403,7 @@ fn eval_writes_reproducible_results_and_refuses_bad_input() {
     let episodes = std::fs::read_to_string(a.join("episodes.csv")).expect("episodes.csv");
     assert!(episodes.starts_with(
         "world,run,episode,seed,x0,y0,yaw0_deg,steps,moving_success,success,collision,\
-         collision_kind,path_m,reach_m,return,min_path_m,min_reach_m\n"
+         collision_kind,hit,path_m,reach_m,return,min_path_m,min_reach_m\n"
     ));
     assert_eq!(episodes.lines().count(), 1 + 2 * 2 * 4);
     let figures: Vec<_> = std::fs::read_dir(a.join("figures")).expect("figures").collect();

@@ -135,6 +135,9 @@ pub struct EpisodeRecord {
     pub steps: u32,
     /// The collision that ended it, if one did.
     pub collision: Option<Collision>,
+    /// What the bumper hit, for a bumper collision: the obstacle's label in the world file
+    /// (`chair seat`, `low box`), else `obstacle N` (its index); empty otherwise.
+    pub hit: String,
     /// Distance driven, metres (up to the collision, if one ended it).
     pub path_m: f32,
     /// The farthest the robot got from its start, metres.
@@ -339,6 +342,14 @@ pub fn evaluate_world(
             seed,
             start: o.start,
             steps: o.steps,
+            hit: match o.collision {
+                Some(Collision::Bumper { obstacle }) => world
+                    .obstacles
+                    .get(obstacle)
+                    .and_then(|ob| ob.label.clone())
+                    .map_or_else(|| format!("obstacle {obstacle}"), |label| label),
+                _ => String::new(),
+            },
             collision: o.collision,
             path_m: o.path_m,
             reach_m: o.reach_m,

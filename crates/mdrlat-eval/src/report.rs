@@ -10,7 +10,7 @@ use std::fmt::Write as _;
 
 /// The header of `episodes.csv`.
 pub const EPISODES_HEADER: &str = "world,run,episode,seed,x0,y0,yaw0_deg,steps,moving_success,\
-success,collision,collision_kind,path_m,reach_m,return,min_path_m,min_reach_m";
+success,collision,collision_kind,hit,path_m,reach_m,return,min_path_m,min_reach_m";
 
 /// The header of `summary.csv`.
 pub const SUMMARY_HEADER: &str = "eval,world,episodes,runs,max_steps,seed,min_path_m,min_reach_m,\
@@ -34,7 +34,7 @@ pub fn csv_field(text: &str) -> String {
 /// One row of `episodes.csv` (no newline), its moving success by `rule`.
 pub fn episode_row(r: &EpisodeRecord, rule: &MovingRule) -> String {
     format!(
-        "{},{},{},{},{:.3},{:.3},{:.1},{},{},{},{},{},{:.3},{:.3},{:.4},{:.3},{:.3}",
+        "{},{},{},{},{:.3},{:.3},{:.1},{},{},{},{},{},{},{:.3},{:.3},{:.4},{:.3},{:.3}",
         csv_field(&r.world),
         r.run,
         r.episode,
@@ -47,12 +47,24 @@ pub fn episode_row(r: &EpisodeRecord, rule: &MovingRule) -> String {
         u8::from(r.success()),
         u8::from(!r.success()),
         r.collision.as_ref().map_or("", collision_kind),
+        csv_field(&r.hit),
         r.path_m,
         r.reach_m,
         r.ret,
         rule.min_path_m,
         rule.min_reach_m
     )
+}
+
+/// Each obstacle the bumper hit with its count, most hit first (ties by label).
+fn bumper_hits(w: &WorldEval) -> Vec<(String, u32)> {
+    let mut counts = std::collections::BTreeMap::<&str, u32>::new();
+    for r in w.records.iter().filter(|r| !r.hit.is_empty()) {
+        *counts.entry(&r.hit).or_default() += 1;
+    }
+    let mut v: Vec<(String, u32)> = counts.into_iter().map(|(k, n)| (k.to_string(), n)).collect();
+    v.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+    v
 }
 
 /// Mean and population std (as `numpy.std`) of per-run rates.
@@ -119,6 +131,10 @@ pub struct WorldSummary {
     /// `summary.csv` (empty when read back from one).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub action_shares: Vec<f64>,
+    /// What the bumper hit: each obstacle label (`EpisodeRecord::hit`) with its count, most
+    /// hit first. In `summary.md` and the JSON, not in `summary.csv`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub bumper_hits: Vec<(String, u32)>,
 }
 
 /// The share of all decisions of `w` that took each action.
@@ -187,6 +203,7 @@ impl WorldSummary {
             return_mean: round(avg(|r| f64::from(r.ret)), 4),
             navigation: w.records.iter().any(|r| r.goal.is_some()),
             action_shares: action_shares(w),
+            bumper_hits: bumper_hits(w),
         }
     }
 
@@ -378,6 +395,7 @@ pub fn parse_summary_csv(text: &str, source: &str) -> Result<Vec<WorldSummary>, 
             return_mean: num(20, "return_mean")?,
             navigation: false,
             action_shares: Vec::new(),
+            bumper_hits: Vec::new(),
         });
     }
     Ok(rows)
@@ -467,6 +485,24 @@ pub fn summary_markdown(rows: &[WorldSummary]) -> String {
             s.push('\n');
         }
     }
+    if rows.iter().any(|r| !r.bumper_hits.is_empty()) {
+        let _ =
+            writeln!(s, "\nWhat the bumper hit (obstacle labels of the world file, episodes):\n");
+        let method = if several { "| method " } else { "" };
+        let _ = writeln!(s, "{method}| world | bumper hits |");
+        let _ = writeln!(s, "{}| --- | --- |", if several { "| --- " } else { "" });
+        for r in rows.iter().filter(|r| !r.bumper_hits.is_empty()) {
+            let method =
+                if several { format!("| {} ", r.eval.replace('|', "\\|")) } else { String::new() };
+            let hits: Vec<String> = r
+                .bumper_hits
+                .iter()
+                .map(|(label, n)| format!("{} {n}", label.replace('|', "\\|")))
+                .collect();
+            let _ =
+                writeln!(s, "{method}| {} | {} |", r.world.replace('|', "\\|"), hits.join(", "));
+        }
+    }
     s
 }
 
@@ -507,6 +543,7 @@ mod tests {
             return_mean: 10.0,
             navigation: false,
             action_shares: Vec::new(),
+            bumper_hits: Vec::new(),
         }
     }
 

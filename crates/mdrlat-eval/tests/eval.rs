@@ -265,3 +265,33 @@ fn the_classical_avoider_gets_through_generated_worlds() {
         assert!(s.moving_success_mean >= 0.8, "gen-{seed}: {s:?}");
     }
 }
+
+/// A bumper collision names what it hit (the obstacle's label), and the summary counts the
+/// labels, most hit first; other endings name nothing.
+#[test]
+fn bumper_hits_are_named_and_counted() {
+    let w = world("furnished");
+    let e = eval(&w, Scripted::WanderLaser, &small(2, 4));
+    let bumped: Vec<_> = e
+        .records
+        .iter()
+        .filter(|r| matches!(r.collision, Some(mdrlat_sim::Collision::Bumper { .. })))
+        .collect();
+    assert!(!bumped.is_empty(), "wander-laser hits low furniture in furnished");
+    for r in &e.records {
+        match r.collision {
+            Some(mdrlat_sim::Collision::Bumper { obstacle }) => {
+                assert_eq!(Some(&r.hit), w.obstacles[obstacle].label.as_ref(), "{r:?}");
+            }
+            _ => assert!(r.hit.is_empty(), "{r:?}"),
+        }
+    }
+    let s = WorldSummary::new("wander-laser", &e, &small(2, 4));
+    assert_eq!(s.bumper_hits.iter().map(|h| h.1).sum::<u32>() as usize, bumped.len());
+    assert!(s.bumper_hits.windows(2).all(|p| p[0].1 >= p[1].1), "{:?}", s.bumper_hits);
+    let (label, n) = &s.bumper_hits[0];
+    assert!(summary_markdown(&[s.clone()]).contains(&format!("{label} {n}")));
+    assert!(
+        episodes_csv([&e], &MovingRule::DEFAULT).contains(&format!(",bumper,{}", bumped[0].hit))
+    );
+}
