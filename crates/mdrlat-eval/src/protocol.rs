@@ -347,7 +347,7 @@ pub fn evaluate_world(
                     .obstacles
                     .get(obstacle)
                     .and_then(|ob| ob.label.clone())
-                    .map_or_else(|| format!("obstacle {obstacle}"), |label| label),
+                    .unwrap_or_else(|| format!("obstacle {obstacle}")),
                 _ => String::new(),
             },
             collision: o.collision,
