@@ -290,7 +290,7 @@ fn bumper_hits_are_named_and_counted() {
     assert_eq!(s.bumper_hits.iter().map(|h| h.1).sum::<u32>() as usize, bumped.len());
     assert!(s.bumper_hits.windows(2).all(|p| p[0].1 >= p[1].1), "{:?}", s.bumper_hits);
     let (label, n) = &s.bumper_hits[0];
-    assert!(summary_markdown(&[s.clone()]).contains(&format!("{label} {n}")));
+    assert!(summary_markdown(std::slice::from_ref(&s)).contains(&format!("{label} {n}")));
     assert!(
         episodes_csv([&e], &MovingRule::DEFAULT).contains(&format!(",bumper,{}", bumped[0].hit))
     );
