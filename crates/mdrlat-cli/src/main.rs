@@ -116,12 +116,16 @@ enum WorldCommand {
         file: PathBuf,
     },
     /// Writes a procedural world: rooms split by walls with one door each, furniture of
-    /// every height class (tall, under the laser plane, overhanging), walkers. The same seed
-    /// gives the same file; `--world gen-N` anywhere uses it without a file.
+    /// every height class (tall, under the laser plane, overhanging), walkers; `--family home`
+    /// adds coffee tables, chairs and benches. The same seed gives the same file; `--world
+    /// gen-N` (`home-N`) anywhere uses it without a file.
     Generate {
         /// Seed of the world.
         #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
         seed: u64,
+        /// The family: gen (the furniture above) or home (with coffee tables, chairs, benches).
+        #[arg(long, default_value = "gen", value_parser = ["gen", "home"])]
+        family: String,
         /// The world file to write (default: print it).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -173,8 +177,13 @@ fn dispatch(command: Command) -> anyhow::Result<()> {
         Command::Eval(a) => cmd::eval::run(&a),
         Command::Worlds => cmd::worlds::list(),
         Command::World(WorldCommand::Check { file }) => cmd::worlds::check(&file),
-        Command::World(WorldCommand::Generate { seed, out }) => {
-            cmd::worlds::generate(seed, out.as_deref())
+        Command::World(WorldCommand::Generate { seed, family, out }) => {
+            let family = if family == "home" {
+                mdrlat_world::Family::Home
+            } else {
+                mdrlat_world::Family::Gen
+            };
+            cmd::worlds::generate(family, seed, out.as_deref())
         }
         Command::Observe(a) => cmd::observe::run(&a),
         Command::Render(a) => cmd::render::run(&a),

@@ -11,6 +11,13 @@
 //! and 1 m clear of every door, so the robot can drive around all of them. Rooms long
 //! enough get a walker pacing their length. The same seed gives the same text, byte for
 //! byte; the result is an ordinary world file, validated as one.
+//!
+//! Two families share the rooms and doors ([`Family`]): `gen-N`, the furniture above, and
+//! `home-N`, which adds the household furniture a depth camera must read — coffee tables
+//! (a 5 cm slab between 0.28 and 0.39 m on thin legs: under the laser plane and seen
+//! almost edge-on by a camera at 0.30 m), chairs (a seat at 0.42–0.47 m on four thin legs the laser sees as
+//! posts, with a backrest) and benches (a seat between two end panels). `gen-N` worlds are
+//! unchanged by it, byte for byte.
 
 use crate::{World, WorldError};
 use mdrlat_core::Rng;
@@ -43,9 +50,47 @@ fn cm(x: f32) -> f32 {
     (x * 100.0).round() / 100.0
 }
 
+/// A family of generated worlds: the same rooms and doors, different furniture.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Family {
+    /// `gen-N`: boxes, low boxes, stools, posts, tables, shelves, columns.
+    Gen,
+    /// `home-N`: the same and coffee tables, chairs and benches.
+    Home,
+}
+
+impl Family {
+    /// Every family.
+    pub const ALL: [Family; 2] = [Family::Gen, Family::Home];
+
+    /// The prefix of its world names: `gen-`, `home-`.
+    pub fn prefix(self) -> &'static str {
+        match self {
+            Family::Gen => "gen-",
+            Family::Home => "home-",
+        }
+    }
+
+    /// How many furniture kinds it draws from.
+    fn kinds(self) -> usize {
+        match self {
+            Family::Gen => 7,
+            Family::Home => 10,
+        }
+    }
+
+    /// The family and seed a world name such as `home-12` stands for.
+    pub fn parse(name: &str) -> Option<(Family, u64)> {
+        Family::ALL.into_iter().find_map(|f| {
+            name.strip_prefix(f.prefix()).and_then(|n| n.parse::<u64>().ok()).map(|s| (f, s))
+        })
+    }
+}
+
 /// What the generator writes, before it becomes text.
 struct Builder {
     rng: Rng,
+    family: Family,
     text: String,
     /// Footprints of the furniture placed so far, and the doors' keep-clear squares.
     taken: Vec<Rect>,
@@ -84,6 +129,14 @@ impl Builder {
     }
 
     /// A wall along x (`horizontal`) or y at `fixed`, from `from` to `to`, with one door
+    /// Four thin legs of radius `r` under the corners of a `hx` × `hy` top, up to `top`.
+    fn legs(&mut self, c: [f32; 2], hx: f32, hy: f32, r: f32, top: f32, label: &str) {
+        for (sx, sy) in [(-1.0, -1.0), (-1.0, 1.0), (1.0, -1.0), (1.0, 1.0)] {
+            let leg = [c[0] + sx * (hx - r - 0.01), c[1] + sy * (hy - r - 0.01)];
+            self.cylinder(leg, r, [0.0, top], label);
+        }
+    }
+
     /// 0.9–1.2 m wide somewhere along it (kept clear of furniture).
     fn wall_with_door(&mut self, horizontal: bool, fixed: f32, from: f32, to: f32) {
         let width = self.range(0.9, 1.2);
@@ -134,7 +187,7 @@ impl Builder {
 
     /// One piece of furniture in `room`, if a free place is found.
     fn furnish(&mut self, room: Rect) {
-        let kind = self.rng.below(7);
+        let kind = self.rng.below(self.family.kinds());
         for _ in 0..30 {
             // Footprint half-sizes, then a centre kept GAP_M from the walls.
             let (hx, hy) = match kind {
@@ -145,6 +198,12 @@ impl Builder {
                 }
                 4 => (self.range(0.4, 0.7), self.range(0.3, 0.45)),
                 5 => (self.range(0.4, 0.6), 0.2),
+                7 => (self.range(0.35, 0.6), self.range(0.25, 0.4)),
+                8 => {
+                    let h = self.range(0.19, 0.23);
+                    (h, h)
+                }
+                9 => (self.range(0.45, 0.7), 0.18),
                 _ => (0.28, 0.28),
             };
             let (x0, x1) = (room[0] + GAP_M + hx, room[2] - GAP_M - hx);
@@ -189,6 +248,29 @@ impl Builder {
                 5 => {
                     self.boxed(c, size, [0.42, 0.9], "shelf");
                 }
+                7 => {
+                    // A coffee table: a 5 cm slab around the camera's height on thin legs.
+                    let z = self.range(0.28, 0.34);
+                    self.boxed(c, size, [z, z + 0.05], "coffee table top");
+                    self.legs(c, hx, hy, 0.025, z, "coffee table leg");
+                }
+                8 => {
+                    // A chair: a seat the laser passes under, its legs, a backrest on one side.
+                    self.boxed(c, size, [0.42, 0.47], "chair seat");
+                    self.legs(c, hx, hy, 0.02, 0.42, "chair leg");
+                    let side = if self.rng.below(2) == 0 { -1.0 } else { 1.0 };
+                    let back = [c[0], c[1] + side * (hy - 0.02)];
+                    self.boxed(back, [2.0 * hx, 0.04], [0.47, 0.9], "chair back");
+                }
+                9 => {
+                    // A bench: a seat between two end panels the laser sees.
+                    let z = self.range(0.4, 0.44);
+                    self.boxed(c, size, [z, z + 0.05], "bench seat");
+                    for sx in [-1.0, 1.0] {
+                        let end = [c[0] + sx * (hx - 0.02), c[1]];
+                        self.boxed(end, [0.04, 2.0 * hy], [0.0, z], "bench end");
+                    }
+                }
                 _ => {
                     let z = self.range(1.2, 2.0);
                     let pts: Vec<String> = (0..6)
@@ -213,9 +295,15 @@ impl Builder {
     }
 }
 
-/// The world file of seed `seed` (TOML text, comments included).
+/// The `gen-N` world file of seed `seed` (TOML text, comments included).
 pub fn generate_toml(seed: u64) -> String {
+    family_toml(Family::Gen, seed)
+}
+
+/// The world file of `family` and `seed` (TOML text, comments included).
+pub fn family_toml(family: Family, seed: u64) -> String {
     let mut b = Builder {
+        family,
         rng: Rng::derive(seed, 0x6E4E),
         text: String::new(),
         taken: Vec::new(),
@@ -223,14 +311,30 @@ pub fn generate_toml(seed: u64) -> String {
         doors: Vec::new(),
     };
     let (w, h) = (b.range(8.0, 14.0), b.range(8.0, 14.0));
-    let _ = writeln!(
-        b.text,
-        "# Generated by `mdrlat world generate --seed {seed}`: rooms split by walls with one door \
-         each,\n# furniture of every height class, walkers. The same seed gives this file again.\n\n\
-         version = 1\nname = \"gen-{seed}\"\ndescription = \"A generated world (seed {seed}): \
-         {w} m x {h} m of rooms, doors, furniture of every height class and walkers.\"\n\
-         bounds = {{ min = [0.0, 0.0], max = [{w}, {h}] }}\n\nobstacle = ["
-    );
+    match family {
+        Family::Gen => {
+            let _ = writeln!(
+                b.text,
+                "# Generated by `mdrlat world generate --seed {seed}`: rooms split by walls with \
+                 one door each,\n# furniture of every height class, walkers. The same seed gives \
+                 this file again.\n\nversion = 1\nname = \"gen-{seed}\"\ndescription = \"A \
+                 generated world (seed {seed}): {w} m x {h} m of rooms, doors, furniture of every \
+                 height class and walkers.\""
+            );
+        }
+        Family::Home => {
+            let _ = writeln!(
+                b.text,
+                "# Generated by `mdrlat world generate --family home --seed {seed}`: rooms split \
+                 by walls with one door each,\n# furniture of every height class with coffee \
+                 tables, chairs and benches, walkers. The same seed gives this file again.\n\n\
+                 version = 1\nname = \"home-{seed}\"\ndescription = \"A generated home (seed \
+                 {seed}): {w} m x {h} m of rooms, doors, furniture of every height class with \
+                 coffee tables, chairs and benches, and walkers.\""
+            );
+        }
+    }
+    let _ = writeln!(b.text, "bounds = {{ min = [0.0, 0.0], max = [{w}, {h}] }}\n\nobstacle = [");
     for (c, size) in [
         ([w / 2.0, WALL_T / 2.0], [w, WALL_T]),
         ([w / 2.0, h - WALL_T / 2.0], [w, WALL_T]),
@@ -297,12 +401,23 @@ pub fn generate_toml(seed: u64) -> String {
     b.text
 }
 
-/// The world of seed `seed`, validated.
+/// The `gen-N` world of seed `seed`, validated.
 ///
 /// # Errors
 /// The generated file fails validation (a generator bug: tested not to happen).
 pub fn generate(seed: u64) -> Result<World, WorldError> {
-    World::from_toml(&format!("generated world, seed {seed}"), &generate_toml(seed))
+    generate_family(Family::Gen, seed)
+}
+
+/// The world of `family` and `seed`, validated.
+///
+/// # Errors
+/// The generated file fails validation (a generator bug: tested not to happen).
+pub fn generate_family(family: Family, seed: u64) -> Result<World, WorldError> {
+    World::from_toml(
+        &format!("generated world {}{seed}", family.prefix()),
+        &family_toml(family, seed),
+    )
 }
 
 #[cfg(test)]
@@ -325,5 +440,47 @@ mod tests {
         }
         // Every height class appears in most worlds.
         assert!(classes.iter().all(|&c| c >= 40), "{classes:?}");
+    }
+
+    /// FNV-1a of a text: pins generated files across changes to the generator.
+    fn fnv(text: &str) -> u64 {
+        text.bytes()
+            .fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3))
+    }
+
+    #[test]
+    fn gen_worlds_are_unchanged_and_homes_add_household_furniture() {
+        // The `gen-N` files as they were before the `home` family existed (2026-12-06).
+        assert_eq!((generate_toml(5).len(), fnv(&generate_toml(5))), (5252, 0x069b_c3bb_19aa_9047));
+        assert_eq!(
+            (generate_toml(60).len(), fnv(&generate_toml(60))),
+            (8836, 0xf246_b149_6c73_5309)
+        );
+        assert_eq!(family_toml(Family::Home, 4), family_toml(Family::Home, 4));
+        let mut kinds = [0usize; 3];
+        for seed in 0..40 {
+            let w =
+                generate_family(Family::Home, seed).unwrap_or_else(|e| panic!("home-{seed}: {e}"));
+            assert_eq!(w.name, format!("home-{seed}"));
+            let text = family_toml(Family::Home, seed);
+            // The same rooms and doors as gen-N: every wall of one is in the other.
+            let walls = |t: &str| -> Vec<String> {
+                t.lines().filter(|l| l.contains("\"wall\"")).map(str::to_string).collect()
+            };
+            assert_eq!(walls(&text), walls(&generate_toml(seed)), "home-{seed}");
+            kinds[0] += usize::from(text.contains("coffee table top"));
+            kinds[1] += usize::from(text.contains("chair seat") && text.contains("chair back"));
+            kinds[2] += usize::from(text.contains("bench seat") && text.contains("bench end"));
+            // The coffee table's top spans the camera's height band, under the laser plane.
+            for l in text.lines().filter(|l| l.contains("coffee table top")) {
+                let z = l.split("z = [").nth(1).expect("z").split(']').next().expect("]");
+                let z: Vec<f32> = z.split(',').map(|v| v.trim().parse().expect("f32")).collect();
+                assert!(z[0] >= 0.28 && z[1] < 0.4 && z[1] - z[0] > 0.04, "{l}");
+            }
+        }
+        assert!(kinds.iter().all(|&k| k >= 20), "{kinds:?}");
+        assert_eq!(Family::parse("home-12"), Some((Family::Home, 12)));
+        assert_eq!(Family::parse("gen-3"), Some((Family::Gen, 3)));
+        assert_eq!(Family::parse("home-x"), None);
     }
 }

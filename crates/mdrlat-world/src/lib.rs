@@ -15,5 +15,5 @@ mod world;
 
 pub use error::WorldError;
 pub use format::FORMAT_VERSION;
-pub use generate::{generate, generate_toml};
+pub use generate::{Family, family_toml, generate, generate_family, generate_toml};
 pub use world::{Obstacle, PedestrianSpec, World, load, load_set};

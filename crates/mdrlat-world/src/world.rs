@@ -293,7 +293,7 @@ impl World {
     }
 }
 
-/// Loads a world by built-in name, `gen-N` (the generated world of seed N, see
+/// Loads a world by built-in name, `gen-N` or `home-N` (the generated world of seed N, see
 /// [`crate::generate`]), or from a `.toml` world file, or from a ROS map_server `.yaml`
 /// (imported with default options: see [`crate::map_server`]).
 ///
@@ -303,8 +303,8 @@ pub fn load(spec: &str) -> Result<World, WorldError> {
     if let Some(w) = crate::builtin::get(spec) {
         return w;
     }
-    if let Some(seed) = spec.strip_prefix("gen-").and_then(|n| n.parse::<u64>().ok()) {
-        return crate::generate(seed);
+    if let Some((family, seed)) = crate::Family::parse(spec) {
+        return crate::generate_family(family, seed);
     }
     let path = Path::new(spec);
     if !path.is_file() {
@@ -323,7 +323,8 @@ pub fn load(spec: &str) -> Result<World, WorldError> {
 }
 
 /// Several worlds from one spec: comma-separated [`load`] specs, where `gen-A..B` stands
-/// for the generated worlds `gen-A` to `gen-(B−1)` (`gen-0..64`: 64 worlds). A spec without
+/// for the generated worlds `gen-A` to `gen-(B−1)` (`gen-0..64`: 64 worlds), and `home-A..B`
+/// for the generated homes. A spec without
 /// a comma or a range is one world, as [`load`] reads it.
 ///
 /// # Errors
@@ -335,19 +336,22 @@ pub fn load_set(spec: &str) -> Result<Vec<World>, WorldError> {
         if part.is_empty() {
             return Err(bad("an empty name (two commas, or one at an end)".into()));
         }
-        let range = part.strip_prefix("gen-").and_then(|r| r.split_once(".."));
-        let Some((a, b)) = range else {
+        let range = crate::Family::ALL.into_iter().find_map(|f| {
+            part.strip_prefix(f.prefix()).and_then(|r| r.split_once("..")).map(|r| (f, r))
+        });
+        let Some((family, (a, b))) = range else {
             worlds.push(load(part)?);
             continue;
         };
         let (Ok(a), Ok(b)) = (a.parse::<u64>(), b.parse::<u64>()) else {
-            return Err(bad(format!("'{part}': expected gen-A..B with whole numbers A < B")));
+            let p = family.prefix();
+            return Err(bad(format!("'{part}': expected {p}A..B with whole numbers A < B")));
         };
         if a >= b || b - a > 10_000 {
             return Err(bad(format!("'{part}': expected A < B and at most 10,000 worlds")));
         }
         for seed in a..b {
-            worlds.push(crate::generate(seed)?);
+            worlds.push(crate::generate_family(family, seed)?);
         }
     }
     Ok(worlds)
@@ -373,6 +377,9 @@ mod tests {
         }
         let e = load_set("gen-9..2").expect_err("reversed").to_string();
         assert!(e.contains("gen-9..2") && e.contains("A < B"), "{e}");
+        assert_eq!(names("home-2..4,train"), ["home-2", "home-3", "train"]);
+        let e = load_set("home-1..y").expect_err("bad range").to_string();
+        assert!(e.contains("home-A..B"), "{e}");
     }
 
     const OK: &str = r#"

@@ -36,8 +36,8 @@ pub fn list() -> Result<()> {
         }
     }
     out!(
-        "\nAny command taking --world also accepts gen-N (a generated world, `mdrlat world \
-         generate`), a .toml world file or a ROS map_server .yaml."
+        "\nAny command taking --world also accepts gen-N or home-N (a generated world, `mdrlat \
+         world generate`), a .toml world file or a ROS map_server .yaml."
     );
     Ok(())
 }
@@ -53,10 +53,10 @@ pub fn check(file: &Path) -> Result<()> {
     Ok(())
 }
 
-/// `mdrlat world generate --seed N [--out FILE]`.
-pub fn generate(seed: u64, out: Option<&Path>) -> Result<()> {
-    let text = mdrlat_world::generate_toml(seed);
-    let w = World::from_toml(&format!("gen-{seed}"), &text)?;
+/// `mdrlat world generate [--family F] --seed N [--out FILE]`.
+pub fn generate(family: mdrlat_world::Family, seed: u64, out: Option<&Path>) -> Result<()> {
+    let text = mdrlat_world::family_toml(family, seed);
+    let w = World::from_toml(&format!("{}{seed}", family.prefix()), &text)?;
     match out {
         Some(path) => {
             super::ensure_parent(path)?;
