@@ -193,10 +193,11 @@ impl AssemblyBuffer {
 const MAX_ASSEMBLY_BUFFERS: usize = 128;
 
 // mdrlat patch: the largest sample reassembled from fragments (a 1920x1080 32FC1 depth image
-// is 8.3 MB), and the most bytes one writer's incomplete reassemblies may hold together
-// (evicted as MAX_ASSEMBLY_BUFFERS is).
+// is 8.3 MB), and the most bytes one writer's incomplete reassemblies may hold together,
+// beyond the newest one (evicted as MAX_ASSEMBLY_BUFFERS is): a writer whose fragments are
+// lost faster than samples complete (a starved reader) holds at most this much.
 pub(crate) const MAX_SAMPLE_BYTES: usize = 64 << 20;
-const MAX_ASSEMBLY_BYTES: usize = 128 << 20;
+const MAX_ASSEMBLY_BYTES: usize = 32 << 20;
 
 // Assembles fragments from a single (remote) Writer
 // So there is only one sequence of SNs
