@@ -26,11 +26,9 @@ import sys
 import threading
 import time
 
-from cyclonedds.core import WaitSet
 from cyclonedds.domain import DomainParticipant
-from cyclonedds.util import duration
 
-from ros_types import (RELIABLE, SENSOR_DATA, Image, LaserScan, Odometry, Twist, any_sample,
+from ros_types import (RELIABLE, SENSOR_DATA, Image, LaserScan, Odometry, Twist, listen_twists,
                        reader, writer)
 
 domain, seconds = int(sys.argv[1]), float(sys.argv[2])
@@ -45,13 +43,7 @@ twists = []
 
 
 def listen():
-    ws = WaitSet(dp)
-    ws.attach(any_sample(cmd))
-    while not stop.is_set():
-        ws.wait(duration(milliseconds=50))
-        for m in cmd.take(N=100):
-            if isinstance(m, Twist):
-                twists.append((time.time(), m.linear.x, m.angular.z))
+    listen_twists(dp, cmd, False, stop, twists)
 
 
 H, W = 240, 320

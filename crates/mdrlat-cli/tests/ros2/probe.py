@@ -16,12 +16,10 @@ import sys
 import threading
 import time
 
-from cyclonedds.core import WaitSet
 from cyclonedds.domain import DomainParticipant
-from cyclonedds.util import duration
 
 from ros_types import (RELIABLE, SENSOR_DATA, BrokenLaserScan, Image, LaserScan, Odometry,
-                       Twist, TwistStamped, any_sample, reader, writer)
+                       Twist, TwistStamped, listen_twists, reader, writer)
 
 domain = int(sys.argv[1])
 stamped = "--stamped" in sys.argv
@@ -38,15 +36,7 @@ stop = threading.Event()
 
 
 def listen():
-    ws = WaitSet(dp)
-    ws.attach(any_sample(cmd))
-    while not stop.is_set():
-        ws.wait(duration(milliseconds=50))
-        for m in cmd.take(N=100):
-            if not isinstance(m, TwistStamped if stamped else Twist):
-                continue  # an InvalidSample: the writer left (the node exited)
-            t = m.twist if stamped else m
-            twists.append((time.time(), t.linear.x, t.angular.z))
+    listen_twists(dp, cmd, stamped, stop, twists)
 
 
 threading.Thread(target=listen, daemon=True).start()

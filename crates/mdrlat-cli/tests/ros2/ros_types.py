@@ -176,3 +176,19 @@ def reader(dp, topic, kind, qos):
 
 def any_sample(r):
     return ReadCondition(r, ViewState.Any | InstanceState.Any | SampleState.Any)
+
+
+def listen_twists(dp, cmd, stamped, stop, out):
+    """Appends (time, v, w) of every command `cmd` receives to `out` until `stop` is set
+    (the base's side of cmd_vel; InvalidSamples, a writer leaving, are skipped)."""
+    import time
+    from cyclonedds.core import WaitSet
+    ws = WaitSet(dp)
+    ws.attach(any_sample(cmd))
+    while not stop.is_set():
+        ws.wait(duration(milliseconds=50))
+        for m in cmd.take(N=100):
+            if not isinstance(m, TwistStamped if stamped else Twist):
+                continue
+            t = m.twist if stamped else m
+            out.append((time.time(), t.linear.x, t.angular.z))
