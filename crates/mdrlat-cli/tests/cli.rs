@@ -355,6 +355,87 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
     assert_clean_failure(&mdrlat(&["train", "--out", o, "--set", "train.lr=0.1"]), &["lr"]);
 }
 
+/// `train.snapshot_minutes` and `mdrlat eval --snapshots`: every snapshot by the protocol,
+/// then success against minutes (table and figure); a run without snapshots is a clear error.
+#[test]
+fn eval_snapshots_measures_success_against_minutes_of_training() {
+    let d = tmp("snapshots");
+    let run = d.join("run");
+    let r = run.to_str().expect("utf8");
+    let o = mdrlat(&[
+        "train",
+        "--variant",
+        "laser-only",
+        "--world",
+        "example",
+        "--steps",
+        "400",
+        "--out",
+        r,
+        "--set",
+        "train.learning_starts=40",
+        "--set",
+        "train.curve_episodes=0",
+        "--set",
+        "train.snapshot_minutes=0.002",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let snapshots: Vec<_> = std::fs::read_dir(run.join("snapshots")).expect("snapshots").collect();
+    assert!(!snapshots.is_empty());
+    let out = d.join("eval");
+    let o = mdrlat(&[
+        "eval",
+        "--snapshots",
+        r,
+        "--world",
+        "crowd",
+        "--episodes",
+        "2",
+        "--runs",
+        "1",
+        "--max-steps",
+        "30",
+        "--out",
+        out.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(out.join("snapshots.csv")).expect("snapshots.csv");
+    assert_eq!(csv.lines().count(), 1 + snapshots.len(), "{csv}");
+    assert!(csv.lines().skip(1).all(|l| l.contains(",crowd,2,1,")), "{csv}");
+    assert!(out.join("snapshots.png").is_file() && out.join("snapshots.md").is_file());
+    let first = std::fs::read_dir(&out)
+        .expect("out")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("minute-")))
+        .expect("a snapshot's own evaluation");
+    assert!(first.join("summary.md").is_file());
+    // Again into the same folder: refused without --overwrite.
+    let again = mdrlat(&[
+        "eval",
+        "--snapshots",
+        r,
+        "--world",
+        "crowd",
+        "--out",
+        out.to_str().expect("utf8"),
+    ]);
+    assert_clean_failure(&again, &["--overwrite"]);
+    // A run trained without snapshots.
+    std::fs::remove_dir_all(run.join("snapshots")).expect("rm");
+    let o = mdrlat(&["eval", "--snapshots", r, "--out", d.join("none").to_str().expect("utf8")]);
+    assert_clean_failure(&o, &["train.snapshot_minutes"]);
+    let o = mdrlat(&[
+        "train",
+        "--variant",
+        "laser-only",
+        "--out",
+        d.join("bad").to_str().expect("utf8"),
+        "--set",
+        "train.snapshot_minutes=-1",
+    ]);
+    assert_clean_failure(&o, &["train.snapshot_minutes"]);
+}
+
 #[test]
 fn eval_writes_reproducible_results_and_refuses_bad_input() {
     let d = tmp("eval");

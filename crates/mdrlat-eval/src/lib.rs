@@ -10,6 +10,8 @@
 //!   collision-free path) and `navigation.csv`/`navigation.md`.
 //! - [`run`]: an evaluation as one operation — a policy in several worlds into a folder
 //!   with its tables and figures (`mdrlat eval`).
+//! - [`snapshots`]: success against minutes of training, from full evaluations of a run's
+//!   snapshots (`train.snapshot_minutes`).
 //! - [`figures`]: paper Figs. 6/7 — six top views with their commands and the
 //!   angular-velocity trace — by replaying an episode's recorded actions.
 //!
@@ -22,6 +24,7 @@ pub mod nav;
 pub mod protocol;
 pub mod report;
 pub mod run;
+pub mod snapshots;
 
 pub use figures::{EpisodeFigure, Pick, draw_episode, draw_navigation, pick_episodes};
 pub use nav::{NavRecord, NavSummary, nav_records, navigation_csv, navigation_markdown};
@@ -33,6 +36,7 @@ pub use report::{
     Timing, WorldSummary, episodes_csv, parse_summary_csv, summary_csv, summary_markdown,
 };
 pub use run::{Agent, EvalObserver, EvalReport, Output, WorldResult, evaluate, prepare_output};
+pub use snapshots::{SnapshotResult, snapshots_chart, snapshots_csv, snapshots_markdown};
 
 /// Why an evaluation failed.
 #[derive(Debug, thiserror::Error)]

@@ -10,6 +10,20 @@ use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::config::Task;
 use std::time::{Duration, Instant};
 
+/// The CPU model (`/proc/cpuinfo`'s first `model name`, or `unknown`), for the record beside
+/// a measured time.
+pub fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown".into())
+}
+
 /// A random batch in the network's input layout (values in the normalised ranges).
 pub fn random_batch(variant: Variant, size: usize, seed: u64) -> Batch {
     let mut rng = Rng::seed_from_u64(seed);

@@ -5,7 +5,8 @@
 //! `meta.json` (format version, variant, counters, RNG and environment state, the replay
 //! file's length and checksum), `online.bpk`, `target.bpk`, `optimizer.bpk` (burnpack; with
 //! the auxiliary loss's own Adam also `optimizer-aux.bpk`; with `train.average_horizon` the
-//! averaged network, `average.bpk`) and `replay.bin`. It is written to `checkpoint.tmp/` and then swapped in, so a run killed
+//! averaged network, `average.bpk`), `replay.bin` and `clock.json` (seconds of training so
+//! far, [`CLOCK_FILE`]). It is written to `checkpoint.tmp/` and then swapped in, so a run killed
 //! at any moment (even `kill -9`) keeps its previous checkpoint and loses at most one
 //! checkpoint interval. The replay buffer is saved in full (0.8 GB for depth variants):
 //! without it a resumed run would relearn from an empty buffer and diverge from the
@@ -27,6 +28,17 @@ use std::path::{Path, PathBuf};
 
 /// Version of the checkpoint format this build reads and writes.
 pub const CHECKPOINT_FORMAT: u32 = 1;
+
+/// The checkpoint's clock: seconds of training up to it (every session counted, the work
+/// redone after a restart once). Kept out of `meta.json`, whose bytes a seed fixes.
+pub const CLOCK_FILE: &str = "clock.json";
+
+/// What [`CLOCK_FILE`] holds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TrainingClock {
+    training_seconds: f64,
+}
 
 /// Frame slots the training loop reserves beyond the replay capacity: an episode of L steps
 /// stores L + 1 frames, so with capacity / 8 spare slots the buffer holds its full capacity
@@ -208,6 +220,7 @@ pub fn save(
     meta: &mut Meta,
     learner: &Learner,
     replay: &ReplayBuffer,
+    training_seconds: f64,
 ) -> Result<(), TrainError> {
     let tmp = run_dir.join("checkpoint.tmp");
     let _ = std::fs::remove_dir_all(&tmp);
@@ -227,6 +240,10 @@ pub fn save(
     File::create(&meta_path)
         .and_then(|mut f| f.write_all(text.as_bytes()).and_then(|()| f.sync_all()))
         .map_err(|e| bad(&meta_path, e.to_string()))?;
+    let clock_path = tmp.join(CLOCK_FILE);
+    let clock = serde_json::to_string(&TrainingClock { training_seconds })
+        .map_err(|e| bad(&clock_path, e.to_string()))?;
+    std::fs::write(&clock_path, clock).map_err(|e| bad(&clock_path, e.to_string()))?;
     // Swap. Until the new folder is in place, either `checkpoint/` or `checkpoint.old/`
     // holds a complete checkpoint (load falls back to the latter).
     let dest = folder(run_dir);
@@ -261,6 +278,36 @@ pub fn read_meta(dir: &Path) -> Result<Meta, TrainError> {
     Ok(meta)
 }
 
+/// The checkpoint folder a resume reads: `checkpoint/`, or `checkpoint.old/` when the run
+/// was killed in the middle of a swap.
+fn resume_folder(run_dir: &Path) -> PathBuf {
+    let dir = folder(run_dir);
+    if !dir.is_dir() && run_dir.join("checkpoint.old").is_dir() {
+        return run_dir.join("checkpoint.old");
+    }
+    dir
+}
+
+/// Seconds of training up to the checkpoint of `run_dir` (see [`CLOCK_FILE`]); `None` for a
+/// checkpoint written before the clock existed.
+///
+/// # Errors
+/// The clock file is unreadable, corrupt or not a finite, non-negative number of seconds.
+pub fn training_seconds(run_dir: &Path) -> Result<Option<f64>, TrainError> {
+    let path = resume_folder(run_dir).join(CLOCK_FILE);
+    let text = match std::fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(bad(&path, e.to_string())),
+    };
+    let clock: TrainingClock =
+        serde_json::from_str(&text).map_err(|e| bad(&path, format!("corrupt: {e}")))?;
+    if !clock.training_seconds.is_finite() || clock.training_seconds < 0.0 {
+        return Err(bad(&path, format!("{} is not a time", clock.training_seconds)));
+    }
+    Ok(Some(clock.training_seconds))
+}
+
 /// Reads the checkpoint of `run_dir` for a run with `config` of `task`.
 ///
 /// # Errors
@@ -272,10 +319,7 @@ pub fn load(
     task: Task,
     device: &Device,
 ) -> Result<(Meta, Learner, ReplayBuffer), TrainError> {
-    let mut dir = folder(run_dir);
-    if !dir.is_dir() && run_dir.join("checkpoint.old").is_dir() {
-        dir = run_dir.join("checkpoint.old"); // killed in the middle of a swap
-    }
+    let dir = resume_folder(run_dir);
     if !dir.is_dir() {
         return Err(bad(&dir, "no checkpoint to resume from (none was written yet?)"));
     }

@@ -109,6 +109,15 @@ pub struct TrainConfig {
     /// How the run's final `model.safetensors` stores its weights (`f16`: half the size,
     /// the same greedy actions in practice; the demo's pipeline check writes f16).
     pub model_precision: Precision,
+    /// Minutes of training between two snapshots of the policy (0: none): at every multiple
+    /// of it the network the run would ship (the averaged one where the run keeps one) is
+    /// written to `snapshots/minute-MMMM.MM/model.safetensors`, for evaluations at fixed
+    /// minutes (`mdrlat eval --snapshots RUN`). Minutes count this process's wall time from
+    /// the start of the loop plus the checkpoint's (`checkpoint/clock.json`), so a resumed
+    /// run goes on counting where its checkpoint stood; the work redone after a restart
+    /// counts once. Which step a snapshot lands on depends on the machine's speed: the
+    /// training itself does not (snapshots touch no random stream).
+    pub snapshot_minutes: f64,
 }
 
 /// Gradient steps between two moves of the averaged network ([`TrainConfig::average_horizon`]).
@@ -149,6 +158,7 @@ impl Default for TrainConfig {
             checkpoint_interval: 10_000,
             final_checkpoint: true,
             model_precision: Precision::F32,
+            snapshot_minutes: 0.0,
         }
     }
 }
@@ -299,6 +309,13 @@ impl TrainConfig {
                 ),
             );
         }
+        if !self.snapshot_minutes.is_finite() || !(0.0..=10_000.0).contains(&self.snapshot_minutes)
+        {
+            return err(
+                "train.snapshot_minutes",
+                format!("must be in [0, 10000] minutes (0: none), got {}", self.snapshot_minutes),
+            );
+        }
         if !(0.0..=1.0).contains(&self.demo_share) {
             return err("train.demo_share", format!("must be in [0, 1], got {}", self.demo_share));
         }
@@ -400,5 +417,9 @@ mod tests {
         assert!(e.contains("train.curve_world") && e.contains("'none'"), "{e}");
         let e = bad(TrainConfig { replay_capacity: 10_000_000, ..Default::default() });
         assert!(e.contains("train.replay_capacity"), "{e}");
+        for minutes in [-1.0, f64::NAN, f64::INFINITY, 1e6] {
+            let e = bad(TrainConfig { snapshot_minutes: minutes, ..Default::default() });
+            assert!(e.contains("train.snapshot_minutes"), "{minutes}: {e}");
+        }
     }
 }

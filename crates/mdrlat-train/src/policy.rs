@@ -154,7 +154,12 @@ impl GreedyPolicy {
     pub fn load(path: &Path, device: &Device, threads: usize) -> Result<Self, String> {
         if let Some(model) = model_file(path) {
             let (config, net, meta) = crate::export::load_safetensors(&model, device)?;
-            let step = meta.get("mdrlat_step").map_or(String::new(), |s| format!(" (step {s})"));
+            // A snapshot (train.snapshot_minutes) also says when it was taken.
+            let minutes = meta
+                .get("mdrlat_training_minutes")
+                .map_or(String::new(), |m| format!(", {m} minutes of training"));
+            let step =
+                meta.get("mdrlat_step").map_or(String::new(), |s| format!(" (step {s}{minutes})"));
             return Self::from_net(
                 config,
                 net,

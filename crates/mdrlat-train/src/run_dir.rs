@@ -10,6 +10,7 @@
 //!   events.out.tfevents.*   the same scalars for TensorBoard
 //!   checkpoint/             everything a resume needs (checkpoint::save)
 //!   model.safetensors       the online network's weights at the end (RunDir::save_model)
+//!   snapshots/minute-*/     the policy at fixed minutes of training (train.snapshot_minutes)
 //! ```
 
 use crate::error::TrainError;
@@ -129,6 +130,51 @@ impl RunDir {
         .map_err(|problem| TrainError::Checkpoint { path, problem })
     }
 
+    /// Writes the policy the run would ship now (the averaged network where it keeps one)
+    /// as the snapshot at `minute` of training (`snapshots/minute-MMMM.MM/model.safetensors`,
+    /// see [`snapshot_name`]), recording the step, the minutes actually trained and the CPU
+    /// in its metadata. Written beside and renamed into place: a run killed meanwhile leaves
+    /// no half snapshot.
+    ///
+    /// # Errors
+    /// The folder or file cannot be written.
+    pub fn save_snapshot(
+        &self,
+        learner: &Learner,
+        step: u64,
+        minute: f64,
+        trained_minutes: f64,
+        precision: crate::config::Precision,
+    ) -> Result<PathBuf, TrainError> {
+        let name = snapshot_name(minute);
+        let (dest, tmp) = (self.snapshots().join(&name), self.snapshots().join(name + ".tmp"));
+        let fail =
+            |path: &Path, e: String| TrainError::Checkpoint { path: path.into(), problem: e };
+        let _ = std::fs::remove_dir_all(&tmp);
+        std::fs::create_dir_all(&tmp).map_err(|e| fail(&tmp, e.to_string()))?;
+        let model = tmp.join("model.safetensors");
+        crate::export::save_safetensors_as(
+            &learner.policy_net(),
+            learner.net_config(),
+            &model,
+            precision,
+            &[
+                ("mdrlat_step", step.to_string()),
+                ("mdrlat_training_minutes", format!("{trained_minutes:.3}")),
+                ("mdrlat_cpu", crate::bench::cpu_model()),
+            ],
+        )
+        .map_err(|e| fail(&model, e))?;
+        let _ = std::fs::remove_dir_all(&dest); // a restarted run's own earlier snapshot
+        std::fs::rename(&tmp, &dest).map_err(|e| fail(&dest, e.to_string()))?;
+        Ok(dest)
+    }
+
+    /// `snapshots/`: the policy at fixed minutes of training (`train.snapshot_minutes`).
+    pub fn snapshots(&self) -> PathBuf {
+        self.root.join("snapshots")
+    }
+
     /// The folder.
     pub fn path(&self) -> &Path {
         &self.root
@@ -157,4 +203,17 @@ impl RunDir {
     pub fn model(&self) -> PathBuf {
         self.root.join("model.safetensors")
     }
+}
+
+/// The folder name of the snapshot at `minute` of training: `minute-0010.00`, sorting in time
+/// order as text.
+pub fn snapshot_name(minute: f64) -> String {
+    format!("minute-{minute:07.2}")
+}
+
+/// The minute a snapshot folder's name stands for (`minute-0010.00` → 10), or `None` for
+/// another name.
+pub fn snapshot_minute(name: &str) -> Option<f64> {
+    let m: f64 = name.strip_prefix("minute-")?.parse().ok()?;
+    (m.is_finite() && m >= 0.0).then_some(m)
 }

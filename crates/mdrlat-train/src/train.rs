@@ -96,6 +96,12 @@ pub fn train(
         let sink = MetricsSink::create(dir)?;
         (Learner::new(config, task, device), replay, run, sink)
     };
+    // The training clock: the checkpoint's seconds (or its TensorBoard time, for one written
+    // before the clock file), then this process's from here on.
+    let trained_before = if resume { trained_seconds_at(dir, run.step)? } else { 0.0 };
+    let clock_start = Instant::now();
+    let trained = || trained_before + clock_start.elapsed().as_secs_f64();
+    let mut snapshots = SnapshotClock::new(config.snapshot_minutes, trained_before);
     let mut explorer = Explorer::new(sim, config, envs.len(), run.step)?;
     let mut batch = Batch::default();
     let mut status = Status { step: run.step, episodes: run.episodes, ..Status::default() };
@@ -160,11 +166,16 @@ pub fn train(
             clock.split(|t| &mut t.output);
         }
         done_steps += envs.len() as u64;
+        if let Some(minute) = snapshots.due(trained()) {
+            let minutes = trained() / 60.0;
+            dir.save_snapshot(&learner, done_steps, minute, minutes, config.model_precision)?;
+            clock.split(|t| &mut t.output);
+        }
         if checkpoint_due {
             sink.flush()?;
             (run.step, run.updates) = (done_steps, learner.updates());
             envs.save_into(&mut run);
-            checkpoint::save(dir.path(), &mut run, &learner, &replay)?;
+            checkpoint::save(dir.path(), &mut run, &learner, &replay, trained())?;
             clock.split(|t| &mut t.output);
         }
     }
@@ -173,6 +184,45 @@ pub fn train(
         (config.total_steps, learner.updates(), run.episodes);
     (report.seconds, report.timing) = (started.elapsed().as_secs_f64(), clock.timing);
     Ok((report, learner))
+}
+
+/// Seconds of training up to the checkpoint at `step` of the run in `dir`: its clock file,
+/// else (a checkpoint from before the clock) the run's TensorBoard time at that step, else 0.
+fn trained_seconds_at(dir: &RunDir, step: u64) -> Result<f64, TrainError> {
+    if let Some(s) = checkpoint::training_seconds(dir.path())? {
+        return Ok(s);
+    }
+    let times = crate::tensorboard::training_seconds(dir.path()).unwrap_or_default();
+    Ok(times.iter().take_while(|&&(s, _)| s <= step).last().map_or(0.0, |&(_, t)| t))
+}
+
+/// When the next snapshot of the policy is due (`train.snapshot_minutes`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SnapshotClock {
+    /// Seconds between snapshots (0: none).
+    every_s: f64,
+    /// The next snapshot's index k (due at k · every_s).
+    next: u64,
+}
+
+impl SnapshotClock {
+    /// Snapshots every `minutes` (0: none) for a run that has trained `trained_s` seconds.
+    fn new(minutes: f64, trained_s: f64) -> Self {
+        let every_s = minutes * 60.0;
+        let next = if every_s > 0.0 { (trained_s / every_s).floor() as u64 + 1 } else { 0 };
+        Self { every_s, next }
+    }
+
+    /// The minute of the snapshot due at `trained_s` seconds of training, if one is: the
+    /// latest multiple passed (a tick longer than the interval skips the ones before it).
+    fn due(&mut self, trained_s: f64) -> Option<f64> {
+        if self.every_s <= 0.0 || trained_s < self.next as f64 * self.every_s {
+            return None;
+        }
+        let k = (trained_s / self.every_s).floor() as u64;
+        self.next = k + 1;
+        Some(k as f64 * self.every_s / 60.0)
+    }
 }
 
 /// The learning curves' worlds: the training world's held-out starts, then the unseen one
@@ -197,4 +247,31 @@ fn empty_replay(config: &TrainConfig, task: Task) -> ReplayBuffer {
     ReplayBuffer::new(cap, frame_reserve(cap), v.uses_laser(), v.uses_depth())
         .with_goals(task == Task::Nav)
         .with_envs(config.envs, config.n_step as usize)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::SnapshotClock;
+
+    #[test]
+    fn snapshots_fall_due_at_each_multiple_of_the_interval() {
+        let mut c = SnapshotClock::new(2.0, 0.0);
+        assert_eq!(c.due(0.0), None);
+        assert_eq!(c.due(119.9), None);
+        assert_eq!(c.due(120.0), Some(2.0));
+        assert_eq!(c.due(121.0), None, "one snapshot per multiple");
+        // A tick that spans two intervals writes the later one.
+        assert_eq!(c.due(500.0), Some(8.0));
+        assert_eq!(c.due(530.0), None);
+        assert_eq!(c.due(600.0), Some(10.0));
+    }
+
+    #[test]
+    fn a_resumed_run_counts_on_from_its_checkpoint_and_zero_means_none() {
+        let mut c = SnapshotClock::new(10.0, 1_500.0); // 25 minutes trained
+        assert_eq!(c.due(1_700.0), None);
+        assert_eq!(c.due(1_800.0), Some(30.0));
+        let mut off = SnapshotClock::new(0.0, 0.0);
+        assert_eq!(off.due(1e9), None);
+    }
 }

@@ -443,3 +443,65 @@ fn a_run_with_an_averaged_policy_resumes_exactly() {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+/// `train.snapshot_minutes`: the policy is written at fixed minutes of training, each
+/// snapshot a model the evaluation reads (with its step and minutes); snapshots change
+/// nothing of the training itself; the checkpoint keeps the clock (out of `meta.json`, whose
+/// bytes the seed fixes) and a resumed run counts on from it.
+#[test]
+fn snapshots_at_fixed_minutes_leave_the_run_unchanged_and_the_clock_resumes() {
+    let dev = Device::flex();
+    let plain = dir("snap-plain");
+    let (_, a) = laser_only(world(), &sim(), 250, &plain, false).expect("run");
+    let snap = dir("snap");
+    // Every 0.06 s of training: several snapshots in a run of a few seconds.
+    let cfg = |steps| TrainConfig { snapshot_minutes: 0.001, ..config(Variant::LaserOnly, steps) };
+    let (_, b) = train(vec![world()], &sim(), &cfg(250), &dev, &snap, false, |_| {}).expect("run");
+    assert_eq!(probe(&a), probe(&b), "same weights with snapshots");
+    for f in ["metrics.csv", "eval.csv", "checkpoint/meta.json"] {
+        assert_eq!(read(&plain, f), read(&snap, f), "{f}");
+    }
+    let clock = |d: &Path| mdrlat_train::checkpoint::training_seconds(d).expect("clock");
+    let first = clock(&snap).expect("the checkpoint has a clock");
+    assert!(first > 0.0, "{first}");
+
+    let names = |d: &Path| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d.join("snapshots"))
+            .expect("snapshots/")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    let written = names(&snap);
+    assert!(written.len() >= 2, "{written:?}");
+    let minutes: Vec<f64> = written
+        .iter()
+        .map(|n| mdrlat_train::run_dir::snapshot_minute(n).expect("a minute-* name"))
+        .collect();
+    assert!(minutes.windows(2).all(|w| w[0] < w[1]), "{minutes:?}");
+    let last = snap.join("snapshots").join(written.last().expect("one"));
+    let meta =
+        mdrlat_train::export::safetensors_metadata(&last.join("model.safetensors")).expect("meta");
+    let step: u64 = meta["mdrlat_step"].parse().expect("step");
+    assert!(step > 0 && step <= 250, "{step}");
+    let trained: f64 = meta["mdrlat_training_minutes"].parse().expect("minutes");
+    assert!(trained >= *minutes.last().expect("one"), "{trained} {minutes:?}");
+    let policy = mdrlat_train::GreedyPolicy::load(&last, &dev, 1).expect("a snapshot is a model");
+    assert!(policy.source().contains("minutes of training"), "{}", policy.source());
+
+    // Extended: the clock goes on from the checkpoint's, the old snapshots stay.
+    train(vec![world()], &sim(), &cfg(300), &dev, &snap, true, |_| {}).expect("resume");
+    assert!(clock(&snap).expect("clock") > first);
+    assert!(names(&snap).len() >= written.len());
+    // A corrupt clock is a clear error naming the file, not a silent restart from zero.
+    std::fs::write(snap.join("checkpoint").join(mdrlat_train::checkpoint::CLOCK_FILE), "{")
+        .expect("write");
+    let e = train(vec![world()], &sim(), &cfg(350), &dev, &snap, true, |_| {})
+        .expect_err("corrupt clock")
+        .to_string();
+    assert!(e.contains("clock.json") && e.contains("corrupt"), "{e}");
+    for d in [plain, snap] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}

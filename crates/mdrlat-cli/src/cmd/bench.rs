@@ -39,18 +39,7 @@ impl SimArgs {
     }
 }
 
-/// The CPU model, for the record.
-pub fn cpu_model() -> String {
-    std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split(':').nth(1))
-                .map(|m| m.trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown".into())
-}
+pub use mdrlat_train::bench::cpu_model;
 
 fn report(t: &Throughput, json: bool) {
     if json {

@@ -8,11 +8,14 @@ use crate::progress;
 use anyhow::{Context, Result, bail};
 use mdrlat_core::Policy;
 use mdrlat_eval::{Agent, EvalError, EvalObserver, EvalSettings, Output, Progress, WorldResult};
+use mdrlat_eval::{SnapshotResult, snapshots_chart, snapshots_csv, snapshots_markdown};
 use mdrlat_plan::MapSource;
 use mdrlat_sim::MovingRule;
 use mdrlat_sim::config::Task;
 use mdrlat_train::GreedyPolicy;
-use std::path::PathBuf;
+use mdrlat_train::RunDir;
+use mdrlat_train::run_dir::snapshot_minute;
+use std::path::{Path, PathBuf};
 
 /// The paper's three unseen test worlds (Fig. 5).
 const TEST_WORLDS: [&str; 3] = ["office", "furnished", "crowd"];
@@ -22,11 +25,16 @@ const NAV_TEST_WORLDS: [&str; 1] = ["nav-test"];
 
 /// Arguments of `mdrlat eval`.
 #[derive(Debug, clap::Args)]
-#[command(group(clap::ArgGroup::new("who").required(true).args(["checkpoint", "policy"])))]
+#[command(group(clap::ArgGroup::new("who").required(true).args(["checkpoint", "policy", "snapshots"])))]
 pub struct Args {
     /// A run directory of `mdrlat train` (or its checkpoint folder): its network acts greedily.
     #[arg(long, value_name = "RUN_DIR", conflicts_with = "policy")]
     checkpoint: Option<PathBuf>,
+    /// Every snapshot of a run (`train.snapshot_minutes`: the policy at fixed minutes of
+    /// training), each by the whole protocol into --out/minute-*/, then success against
+    /// minutes: --out/snapshots.csv, snapshots.md and snapshots.png.
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["policy", "checkpoint"])]
+    snapshots: Option<PathBuf>,
     /// A policy that needs no training instead: random, forward, wander, wander-laser, spin,
     /// circle, avoid, avoid-laser or avoid-stack (`wander` and the classical `avoid` are the
     /// non-learned baseline rows; `avoid-laser`, the avoider on the laser alone, is the
@@ -120,6 +128,7 @@ impl Args {
         };
         Ok(Args {
             checkpoint,
+            snapshots: None,
             policy,
             worlds: e.worlds.clone(),
             // As the command line it shows as: `--task` only when not the default.
@@ -152,9 +161,18 @@ impl Args {
 /// Runs `mdrlat eval`.
 pub fn run(a: &Args) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let (settings, config, worlds) = prepare(a, cores)?;
+    if let Some(run) = &a.snapshots {
+        return run_snapshots(a, run, cores, &settings, &config, &worlds);
+    }
     if a.threads == Some(0) || a.threads.is_some_and(|t| t > 1024) {
         bail!("--threads {}: must be 1 to 1024", a.threads.unwrap_or_default());
     }
+    run_one(a, cores, &settings, &config, &worlds)
+}
+
+/// The protocol's settings, the simulator's configuration and the worlds of `a`.
+fn prepare(a: &Args, cores: usize) -> Result<(EvalSettings, Config, Vec<mdrlat_world::World>)> {
     let settings = EvalSettings {
         episodes: a.episodes,
         runs: a.runs,
@@ -189,23 +207,40 @@ pub fn run(a: &Args) -> Result<()> {
     if matches!(a.policy, Some(PolicyArg::Planner(_))) && !nav {
         bail!("--policy planner drives to a goal: add --task nav");
     }
+    Ok((settings, config, worlds))
+}
+
+/// The trained network at `path` (a run, checkpoint, model file or folder) as `a` asks for
+/// it, checked against the task, and its FLOPs per decision.
+fn network(a: &Args, path: &Path, cores: usize, task: Task) -> Result<(GreedyPolicy, f64)> {
+    let device = a.device.device();
+    let p = GreedyPolicy::load(path, &device, a.threads.unwrap_or(cores))
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("--checkpoint {}", path.display()))?
+        .with_forward_batch(Some(a.forward_batch));
+    let p = if a.bf16 {
+        p.with_bf16_weights().map_err(anyhow::Error::msg).context("--bf16")?
+    } else {
+        p
+    };
+    p.check_task(task, &format!("--checkpoint {}", path.display())).map_err(anyhow::Error::msg)?;
+    let flops = p.config().decision_flops() as f64;
+    Ok((p, flops))
+}
+
+/// Continues `run`: the evaluation of one policy (or the planner, per world).
+fn run_one(
+    a: &Args,
+    cores: usize,
+    settings: &EvalSettings,
+    config: &Config,
+    worlds: &[mdrlat_world::World],
+) -> Result<()> {
     // The planner's map is its world's: it is made per world below.
     let (mut policy, flop_per_decision): (Option<Box<dyn Policy>>, Option<f64>) =
         match (&a.checkpoint, a.policy) {
             (Some(run), None) => {
-                let device = a.device.device();
-                let p = GreedyPolicy::load(run, &device, a.threads.unwrap_or(cores))
-                    .map_err(anyhow::Error::msg)
-                    .with_context(|| format!("--checkpoint {}", run.display()))?
-                    .with_forward_batch(Some(a.forward_batch));
-                let p = if a.bf16 {
-                    p.with_bf16_weights().map_err(anyhow::Error::msg).context("--bf16")?
-                } else {
-                    p
-                };
-                p.check_task(config.sim.task, &format!("--checkpoint {}", run.display()))
-                    .map_err(anyhow::Error::msg)?;
-                let flops = p.config().decision_flops() as f64;
+                let (p, flops) = network(a, run, cores, config.sim.task)?;
                 (Some(Box::new(p)), Some(flops))
             }
             (None, Some(PolicyArg::Scripted(s))) => (Some(s.build(&config.sim, a.seed)), None),
@@ -221,28 +256,22 @@ pub fn run(a: &Args) -> Result<()> {
             .map_err(|e| EvalError::Settings(format!("planner for '{}': {e:#}", world.name)))
     };
     let total = (settings.episodes_per_world() * worlds.len()) as u64;
-    let mut shown = Shown { pb: progress::bar(total, "eval"), json: a.json };
+    let mut shown = Shown { pb: progress::bar(total, "eval"), json: a.json, offset: 0 };
     let agent = match policy.as_mut() {
         Some(p) => Agent::One(p.as_mut()),
         None => Agent::PerWorld(&mut planner),
     };
     let out = Output { dir: &a.out, overwrite: a.overwrite, figures: a.figures };
     let report = mdrlat_eval::evaluate(
-        &worlds,
+        worlds,
         &config.sim,
-        &settings,
+        settings,
         agent,
         flop_per_decision,
         &out,
         &mut shown,
     )
-    .map_err(|e| match e {
-        // The library checks the folder first; here its option is a flag.
-        EvalError::Output(m) if m.contains("already holds an evaluation") => {
-            anyhow::anyhow!("{m} (--overwrite)")
-        }
-        e => e.into(),
-    })?;
+    .map_err(flag_hint)?;
     shown.pb.finish_and_clear();
     if !a.json {
         let (names, written) = (report.policies.join(", "), report.written.join(", "));
@@ -251,15 +280,126 @@ pub fn run(a: &Args) -> Result<()> {
     Ok(())
 }
 
+/// The library checks an output folder first; here its option is a flag.
+fn flag_hint(e: EvalError) -> anyhow::Error {
+    match e {
+        EvalError::Output(m) if m.contains("already holds an evaluation") => {
+            anyhow::anyhow!("{m} (--overwrite)")
+        }
+        e => e.into(),
+    }
+}
+
+/// The snapshots of the run in `run` (`train.snapshot_minutes`), in time order.
+fn snapshots_of(run: &Path) -> Result<Vec<(f64, PathBuf)>> {
+    let dir = RunDir::at(run).snapshots();
+    let entries = std::fs::read_dir(&dir).with_context(|| {
+        format!(
+            "--snapshots {}: no {} (train with --set train.snapshot_minutes=M)",
+            run.display(),
+            dir.display()
+        )
+    })?;
+    let mut found = Vec::new();
+    for entry in entries {
+        let path = entry.with_context(|| format!("reading {}", dir.display()))?.path();
+        let minute = path.file_name().and_then(|n| n.to_str()).and_then(snapshot_minute);
+        if let Some(m) = minute.filter(|_| path.join("model.safetensors").is_file()) {
+            found.push((m, path));
+        }
+    }
+    if found.is_empty() {
+        bail!(
+            "--snapshots {}: {} holds no snapshot (minute-*/model.safetensors)",
+            run.display(),
+            dir.display()
+        );
+    }
+    found.sort_by(|x, y| x.0.total_cmp(&y.0));
+    Ok(found)
+}
+
+/// `mdrlat eval --snapshots RUN`: each snapshot by the whole protocol into its own folder,
+/// then success against minutes of training.
+fn run_snapshots(
+    a: &Args,
+    run: &Path,
+    cores: usize,
+    settings: &EvalSettings,
+    config: &Config,
+    worlds: &[mdrlat_world::World],
+) -> Result<()> {
+    let snapshots = snapshots_of(run)?;
+    let total = (settings.episodes_per_world() * worlds.len() * snapshots.len()) as u64;
+    let mut shown = Shown { pb: progress::bar(total, "eval"), json: a.json, offset: 0 };
+    let mut rows = Vec::new();
+    let mut cpu = None;
+    let per_snapshot = (settings.episodes_per_world() * worlds.len()) as u64;
+    for (k, (minute, path)) in snapshots.iter().enumerate() {
+        let (mut p, flops) = network(a, path, cores, config.sim.task)?;
+        let meta = mdrlat_train::export::safetensors_metadata(&path.join("model.safetensors"))
+            .map_err(anyhow::Error::msg)?;
+        let name = path.file_name().map_or_else(String::new, |n| n.to_string_lossy().into());
+        let dir = a.out.join(&name);
+        let out = Output { dir: &dir, overwrite: a.overwrite, figures: a.figures };
+        shown.offset = k as u64 * per_snapshot;
+        if !a.json {
+            let step = meta.get("mdrlat_step").map_or(String::new(), |s| format!(", step {s}"));
+            shown.pb.suspend(|| out!("{name}{step}:"));
+        }
+        let report = mdrlat_eval::evaluate(
+            worlds,
+            &config.sim,
+            settings,
+            Agent::One(&mut p),
+            Some(flops),
+            &out,
+            &mut shown,
+        )
+        .map_err(flag_hint)?;
+        cpu = cpu.or_else(|| meta.get("mdrlat_cpu").cloned());
+        rows.push(SnapshotResult {
+            minute: *minute,
+            training_minutes: meta.get("mdrlat_training_minutes").and_then(|m| m.parse().ok()),
+            step: meta.get("mdrlat_step").and_then(|s| s.parse().ok()),
+            worlds: report.worlds.into_iter().map(|w| w.summary).collect(),
+        });
+    }
+    shown.pb.finish_and_clear();
+    let name =
+        run.file_name().map_or_else(|| run.display().to_string(), |n| n.to_string_lossy().into());
+    let cpu = cpu.unwrap_or_else(|| "an unrecorded CPU".into());
+    let title = format!("{name}, against minutes of training on {cpu}");
+    let write = |file: &str, text: &str| -> Result<()> {
+        let path = a.out.join(file);
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
+    };
+    write("snapshots.csv", &snapshots_csv(&rows))?;
+    write("snapshots.md", &snapshots_markdown(&rows, &title))?;
+    let png = a.out.join("snapshots.png");
+    snapshots_chart(&rows, &name, &cpu).save_png(&png)?;
+    if !a.json {
+        out!(
+            "{} snapshots of {}: wrote minute-*/, snapshots.csv, snapshots.md, snapshots.png in {}",
+            rows.len(),
+            run.display(),
+            a.out.display()
+        );
+    }
+    Ok(())
+}
+
 /// The progress bar, and each world's line as it is done.
 struct Shown {
     pb: indicatif::ProgressBar,
     json: bool,
+    /// Episodes done before this evaluation (earlier snapshots').
+    offset: u64,
 }
 
 impl EvalObserver for Shown {
     fn progress(&mut self, before: usize, p: &Progress<'_>) {
-        self.pb.set_position((before + p.done) as u64);
+        self.pb.set_position(self.offset + (before + p.done) as u64);
         let pct = |n: usize| 100.0 * n as f64 / p.done.max(1) as f64;
         self.pb.set_message(format!(
             "{} {:.0}% moving, {:.0}% no collision",
