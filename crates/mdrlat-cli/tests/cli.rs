@@ -420,6 +420,16 @@ fn eval_snapshots_measures_success_against_minutes_of_training() {
         out.to_str().expect("utf8"),
     ]);
     assert_clean_failure(&again, &["--overwrite"]);
+    let elsewhere = d.join("elsewhere");
+    let e = elsewhere.to_str().expect("utf8");
+    assert_clean_failure(
+        &mdrlat(&["eval", "--snapshots", r, "--task", "nav", "--out", e]),
+        &["--snapshots with --task nav"],
+    );
+    assert_clean_failure(
+        &mdrlat(&["eval", "--snapshots", r, "--threads", "0", "--out", e]),
+        &["--threads"],
+    );
     // A run trained without snapshots.
     std::fs::remove_dir_all(run.join("snapshots")).expect("rm");
     let o = mdrlat(&["eval", "--snapshots", r, "--out", d.join("none").to_str().expect("utf8")]);

@@ -90,7 +90,11 @@ fn io(path: &Path, e: impl std::fmt::Display) -> EvalError {
     EvalError::Output(format!("{}: {e}", path.display()))
 }
 
-fn write(path: &Path, text: &str) -> Result<(), EvalError> {
+/// Writes `text` to `path`; an error names the file.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn write(path: &Path, text: &str) -> Result<(), EvalError> {
     std::fs::write(path, text).map_err(|e| io(path, e))
 }
 

@@ -27,7 +27,7 @@ pub fn snapshots_csv(rows: &[SnapshotResult]) -> String {
     for r in rows {
         for w in &r.worlds {
             out.push_str(&format!(
-                "{:.2},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6},{:.3}\n",
+                "{:.3},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6},{:.3}\n",
                 r.minute,
                 r.training_minutes.map_or(String::new(), |m| format!("{m:.3}")),
                 r.step.map_or(String::new(), |s| s.to_string()),
@@ -97,7 +97,11 @@ pub fn snapshots_chart(rows: &[SnapshotResult], run: &str, cpu: &str) -> Image {
             .map(|(i, name)| {
                 let pts: Vec<(f32, f32, f32)> = rows
                     .iter()
-                    .filter_map(|r| r.worlds.get(i).map(|w| (r.minute, w)))
+                    // Where the weights were taken: the minutes actually trained (a tick or
+                    // a learning-curve evaluation past the minute the snapshot was due).
+                    .filter_map(|r| {
+                        r.worlds.get(i).map(|w| (r.training_minutes.unwrap_or(r.minute), w))
+                    })
                     .map(|(m, w)| {
                         let (mean, std) = if moving {
                             (w.moving_success_mean, w.moving_success_std)
@@ -186,9 +190,9 @@ mod tests {
         assert_eq!(lines.len(), 5, "{csv}");
         assert_eq!(
             lines[1],
-            "2.00,2.013,4800,office,50,5,0.250000,0.020000,0.500000,0.010000,12.500"
+            "2.000,2.013,4800,office,50,5,0.250000,0.020000,0.500000,0.010000,12.500"
         );
-        assert_eq!(lines[4], "4.00,,,crowd,50,5,1.000000,0.020000,1.000000,0.010000,12.500");
+        assert_eq!(lines[4], "4.000,,,crowd,50,5,1.000000,0.020000,1.000000,0.010000,12.500");
         let md = snapshots_markdown(&rows, "laser-only, fast preset");
         assert!(md.contains("| minute | step | office | crowd |"), "{md}");
         assert!(md.contains("| 2 | 4800 | 25.0 ± 2.0 (50.0) | 50.0 ± 2.0 (75.0) |"), "{md}");

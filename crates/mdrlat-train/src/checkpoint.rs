@@ -243,7 +243,9 @@ pub fn save(
     let clock_path = tmp.join(CLOCK_FILE);
     let clock = serde_json::to_string(&TrainingClock { training_seconds })
         .map_err(|e| bad(&clock_path, e.to_string()))?;
-    std::fs::write(&clock_path, clock).map_err(|e| bad(&clock_path, e.to_string()))?;
+    File::create(&clock_path)
+        .and_then(|mut f| f.write_all(clock.as_bytes()).and_then(|()| f.sync_all()))
+        .map_err(|e| bad(&clock_path, e.to_string()))?;
     // Swap. Until the new folder is in place, either `checkpoint/` or `checkpoint.old/`
     // holds a complete checkpoint (load falls back to the latter).
     let dest = folder(run_dir);

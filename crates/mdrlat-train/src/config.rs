@@ -111,12 +111,14 @@ pub struct TrainConfig {
     pub model_precision: Precision,
     /// Minutes of training between two snapshots of the policy (0: none): at every multiple
     /// of it the network the run would ship (the averaged one where the run keeps one) is
-    /// written to `snapshots/minute-MMMM.MM/model.safetensors`, for evaluations at fixed
+    /// written to `snapshots/minute-MMMM.MMM/model.safetensors`, for evaluations at fixed
     /// minutes (`mdrlat eval --snapshots RUN`). Minutes count this process's wall time from
     /// the start of the loop plus the checkpoint's (`checkpoint/clock.json`), so a resumed
     /// run goes on counting where its checkpoint stood; the work redone after a restart
     /// counts once. Which step a snapshot lands on depends on the machine's speed: the
-    /// training itself does not (snapshots touch no random stream).
+    /// training itself does not (snapshots touch no random stream). Snapshots are taken
+    /// between ticks (`train.envs` steps), so an interval shorter than a tick skips some.
+    /// 0 or 0.001 to 10,000.
     pub snapshot_minutes: f64,
 }
 
@@ -309,11 +311,11 @@ impl TrainConfig {
                 ),
             );
         }
-        if !self.snapshot_minutes.is_finite() || !(0.0..=10_000.0).contains(&self.snapshot_minutes)
-        {
+        let m = self.snapshot_minutes;
+        if !m.is_finite() || !(m == 0.0 || (0.001..=10_000.0).contains(&m)) {
             return err(
                 "train.snapshot_minutes",
-                format!("must be in [0, 10000] minutes (0: none), got {}", self.snapshot_minutes),
+                format!("must be 0 (none) or 0.001 to 10000 minutes, got {m}"),
             );
         }
         if !(0.0..=1.0).contains(&self.demo_share) {
@@ -417,7 +419,7 @@ mod tests {
         assert!(e.contains("train.curve_world") && e.contains("'none'"), "{e}");
         let e = bad(TrainConfig { replay_capacity: 10_000_000, ..Default::default() });
         assert!(e.contains("train.replay_capacity"), "{e}");
-        for minutes in [-1.0, f64::NAN, f64::INFINITY, 1e6] {
+        for minutes in [-1.0, 0.0001, f64::NAN, f64::INFINITY, 1e6] {
             let e = bad(TrainConfig { snapshot_minutes: minutes, ..Default::default() });
             assert!(e.contains("train.snapshot_minutes"), "{minutes}: {e}");
         }

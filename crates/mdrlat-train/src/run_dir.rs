@@ -131,7 +131,7 @@ impl RunDir {
     }
 
     /// Writes the policy the run would ship now (the averaged network where it keeps one)
-    /// as the snapshot at `minute` of training (`snapshots/minute-MMMM.MM/model.safetensors`,
+    /// as the snapshot at `minute` of training (`snapshots/minute-MMMM.MMM/model.safetensors`,
     /// see [`snapshot_name`]), recording the step, the minutes actually trained and the CPU
     /// in its metadata. Written beside and renamed into place: a run killed meanwhile leaves
     /// no half snapshot.
@@ -160,6 +160,7 @@ impl RunDir {
             precision,
             &[
                 ("mdrlat_step", step.to_string()),
+                ("mdrlat_snapshot_minute", minute.to_string()),
                 ("mdrlat_training_minutes", format!("{trained_minutes:.3}")),
                 ("mdrlat_cpu", crate::bench::cpu_model()),
             ],
@@ -205,13 +206,14 @@ impl RunDir {
     }
 }
 
-/// The folder name of the snapshot at `minute` of training: `minute-0010.00`, sorting in time
-/// order as text.
+/// The folder name of the snapshot at `minute` of training: `minute-0010.000` (three
+/// decimals: `train.snapshot_minutes` is at least 0.001, so two snapshots never share a
+/// name), sorting in time order as text below 10,000 minutes.
 pub fn snapshot_name(minute: f64) -> String {
-    format!("minute-{minute:07.2}")
+    format!("minute-{minute:08.3}")
 }
 
-/// The minute a snapshot folder's name stands for (`minute-0010.00` → 10), or `None` for
+/// The minute a snapshot folder's name stands for (`minute-0010.000` → 10), or `None` for
 /// another name.
 pub fn snapshot_minute(name: &str) -> Option<f64> {
     let m: f64 = name.strip_prefix("minute-")?.parse().ok()?;

@@ -98,7 +98,11 @@ pub fn train(
     };
     // The training clock: the checkpoint's seconds (or its TensorBoard time, for one written
     // before the clock file), then this process's from here on.
-    let trained_before = if resume { trained_seconds_at(dir, run.step)? } else { 0.0 };
+    let trained_before = if resume {
+        trained_seconds_at(dir, run.step, config.snapshot_minutes > 0.0)?
+    } else {
+        0.0
+    };
     let clock_start = Instant::now();
     let trained = || trained_before + clock_start.elapsed().as_secs_f64();
     let mut snapshots = SnapshotClock::new(config.snapshot_minutes, trained_before);
@@ -187,12 +191,24 @@ pub fn train(
 }
 
 /// Seconds of training up to the checkpoint at `step` of the run in `dir`: its clock file,
-/// else (a checkpoint from before the clock) the run's TensorBoard time at that step, else 0.
-fn trained_seconds_at(dir: &RunDir, step: u64) -> Result<f64, TrainError> {
+/// else (a checkpoint from before the clock) the run's TensorBoard time at that step. Event
+/// files that cannot be read count 0 seconds, unless the run takes snapshots (`needed`),
+/// whose minutes would then be wrong: an error.
+fn trained_seconds_at(dir: &RunDir, step: u64, needed: bool) -> Result<f64, TrainError> {
     if let Some(s) = checkpoint::training_seconds(dir.path())? {
         return Ok(s);
     }
-    let times = crate::tensorboard::training_seconds(dir.path()).unwrap_or_default();
+    let times = match crate::tensorboard::training_seconds(dir.path()) {
+        Ok(times) => times,
+        Err(e) if needed => {
+            let problem = format!(
+                "no clock.json, and its TensorBoard events cannot time the run for \
+                 train.snapshot_minutes: {e}"
+            );
+            return Err(TrainError::Checkpoint { path: checkpoint::folder(dir.path()), problem });
+        }
+        Err(_) => Vec::new(),
+    };
     Ok(times.iter().take_while(|&&(s, _)| s <= step).last().map_or(0.0, |&(_, t)| t))
 }
 

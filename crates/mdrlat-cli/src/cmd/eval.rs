@@ -14,7 +14,7 @@ use mdrlat_sim::MovingRule;
 use mdrlat_sim::config::Task;
 use mdrlat_train::GreedyPolicy;
 use mdrlat_train::RunDir;
-use mdrlat_train::run_dir::snapshot_minute;
+use mdrlat_train::run_dir::{snapshot_minute, snapshot_name};
 use std::path::{Path, PathBuf};
 
 /// The paper's three unseen test worlds (Fig. 5).
@@ -96,7 +96,7 @@ pub struct Args {
     threads: Option<usize>,
     /// Opt-in: the network's linear layers read bfloat16 weights (see `mdrlat ros --bf16`),
     /// to measure what that precision does to the success rate. Needs AVX-512.
-    #[arg(long, requires = "checkpoint")]
+    #[arg(long, conflicts_with = "policy")]
     bf16: bool,
     /// Threads stepping the simulator (0: all cores; measured faster than 1 even beside a
     /// network, which has the cores to itself while the simulator waits).
@@ -162,17 +162,17 @@ impl Args {
 pub fn run(a: &Args) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let (settings, config, worlds) = prepare(a, cores)?;
-    if let Some(run) = &a.snapshots {
-        return run_snapshots(a, run, cores, &settings, &config, &worlds);
+    match &a.snapshots {
+        Some(run) => run_snapshots(a, run, cores, &settings, &config, &worlds),
+        None => run_one(a, cores, &settings, &config, &worlds),
     }
-    if a.threads == Some(0) || a.threads.is_some_and(|t| t > 1024) {
-        bail!("--threads {}: must be 1 to 1024", a.threads.unwrap_or_default());
-    }
-    run_one(a, cores, &settings, &config, &worlds)
 }
 
 /// The protocol's settings, the simulator's configuration and the worlds of `a`.
 fn prepare(a: &Args, cores: usize) -> Result<(EvalSettings, Config, Vec<mdrlat_world::World>)> {
+    if a.threads == Some(0) || a.threads.is_some_and(|t| t > 1024) {
+        bail!("--threads {}: must be 1 to 1024", a.threads.unwrap_or_default());
+    }
     let settings = EvalSettings {
         episodes: a.episodes,
         runs: a.runs,
@@ -212,18 +212,24 @@ fn prepare(a: &Args, cores: usize) -> Result<(EvalSettings, Config, Vec<mdrlat_w
 
 /// The trained network at `path` (a run, checkpoint, model file or folder) as `a` asks for
 /// it, checked against the task, and its FLOPs per decision.
-fn network(a: &Args, path: &Path, cores: usize, task: Task) -> Result<(GreedyPolicy, f64)> {
+fn network(
+    a: &Args,
+    path: &Path,
+    flag: &str,
+    cores: usize,
+    task: Task,
+) -> Result<(GreedyPolicy, f64)> {
     let device = a.device.device();
     let p = GreedyPolicy::load(path, &device, a.threads.unwrap_or(cores))
         .map_err(anyhow::Error::msg)
-        .with_context(|| format!("--checkpoint {}", path.display()))?
+        .with_context(|| format!("{flag} {}", path.display()))?
         .with_forward_batch(Some(a.forward_batch));
     let p = if a.bf16 {
         p.with_bf16_weights().map_err(anyhow::Error::msg).context("--bf16")?
     } else {
         p
     };
-    p.check_task(task, &format!("--checkpoint {}", path.display())).map_err(anyhow::Error::msg)?;
+    p.check_task(task, &format!("{flag} {}", path.display())).map_err(anyhow::Error::msg)?;
     let flops = p.config().decision_flops() as f64;
     Ok((p, flops))
 }
@@ -240,12 +246,14 @@ fn run_one(
     let (mut policy, flop_per_decision): (Option<Box<dyn Policy>>, Option<f64>) =
         match (&a.checkpoint, a.policy) {
             (Some(run), None) => {
-                let (p, flops) = network(a, run, cores, config.sim.task)?;
+                let (p, flops) = network(a, run, "--checkpoint", cores, config.sim.task)?;
                 (Some(Box::new(p)), Some(flops))
             }
             (None, Some(PolicyArg::Scripted(s))) => (Some(s.build(&config.sim, a.seed)), None),
             (None, Some(PolicyArg::Planner(_))) => (None, None),
-            _ => bail!("give exactly one of --checkpoint RUN_DIR and --policy NAME"),
+            _ => bail!(
+                "give exactly one of --checkpoint RUN_DIR, --snapshots RUN_DIR and --policy NAME"
+            ),
         };
     let mut planner = |world: &mdrlat_world::World| -> Result<Box<dyn Policy>, EvalError> {
         let map = match a.policy {
@@ -329,17 +337,39 @@ fn run_snapshots(
     config: &Config,
     worlds: &[mdrlat_world::World],
 ) -> Result<()> {
+    if config.sim.task == Task::Nav {
+        bail!(
+            "--snapshots with --task nav: success against minutes is drawn for obstacle \
+             avoidance only; evaluate a navigation run's snapshots one by one with --checkpoint"
+        );
+    }
     let snapshots = snapshots_of(run)?;
+    // Every folder checked before the first evaluation, not after some are done; with
+    // --overwrite, an earlier evaluation's folders of snapshots that no longer exist go.
+    let names: Vec<String> = snapshots.iter().map(|(m, _)| snapshot_name(*m)).collect();
+    for name in &names {
+        mdrlat_eval::prepare_output(&a.out.join(name), a.overwrite).map_err(flag_hint)?;
+    }
+    if a.overwrite {
+        for entry in std::fs::read_dir(&a.out).with_context(|| a.out.display().to_string())? {
+            let path = entry?.path();
+            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+            if snapshot_minute(name).is_some() && !names.iter().any(|n| n == name) {
+                std::fs::remove_dir_all(&path)
+                    .with_context(|| format!("removing the stale {}", path.display()))?;
+            }
+        }
+    }
     let total = (settings.episodes_per_world() * worlds.len() * snapshots.len()) as u64;
     let mut shown = Shown { pb: progress::bar(total, "eval"), json: a.json, offset: 0 };
     let mut rows = Vec::new();
-    let mut cpu = None;
+    let mut cpus: Vec<String> = Vec::new();
     let per_snapshot = (settings.episodes_per_world() * worlds.len()) as u64;
     for (k, (minute, path)) in snapshots.iter().enumerate() {
-        let (mut p, flops) = network(a, path, cores, config.sim.task)?;
+        let (mut p, flops) = network(a, path, "--snapshots", cores, config.sim.task)?;
         let meta = mdrlat_train::export::safetensors_metadata(&path.join("model.safetensors"))
             .map_err(anyhow::Error::msg)?;
-        let name = path.file_name().map_or_else(String::new, |n| n.to_string_lossy().into());
+        let name = snapshot_name(*minute);
         let dir = a.out.join(&name);
         let out = Output { dir: &dir, overwrite: a.overwrite, figures: a.figures };
         shown.offset = k as u64 * per_snapshot;
@@ -357,9 +387,15 @@ fn run_snapshots(
             &mut shown,
         )
         .map_err(flag_hint)?;
-        cpu = cpu.or_else(|| meta.get("mdrlat_cpu").cloned());
+        let cpu = meta.get("mdrlat_cpu").cloned().unwrap_or_else(|| "an unrecorded CPU".into());
+        if !cpus.contains(&cpu) {
+            cpus.push(cpu);
+        }
         rows.push(SnapshotResult {
-            minute: *minute,
+            minute: meta
+                .get("mdrlat_snapshot_minute")
+                .and_then(|m| m.parse().ok())
+                .unwrap_or(*minute),
             training_minutes: meta.get("mdrlat_training_minutes").and_then(|m| m.parse().ok()),
             step: meta.get("mdrlat_step").and_then(|s| s.parse().ok()),
             worlds: report.worlds.into_iter().map(|w| w.summary).collect(),
@@ -368,14 +404,11 @@ fn run_snapshots(
     shown.pb.finish_and_clear();
     let name =
         run.file_name().map_or_else(|| run.display().to_string(), |n| n.to_string_lossy().into());
-    let cpu = cpu.unwrap_or_else(|| "an unrecorded CPU".into());
+    // A run resumed on other machines names each.
+    let cpu = cpus.join(" and ");
     let title = format!("{name}, against minutes of training on {cpu}");
-    let write = |file: &str, text: &str| -> Result<()> {
-        let path = a.out.join(file);
-        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
-    };
-    write("snapshots.csv", &snapshots_csv(&rows))?;
-    write("snapshots.md", &snapshots_markdown(&rows, &title))?;
+    mdrlat_eval::run::write(&a.out.join("snapshots.csv"), &snapshots_csv(&rows))?;
+    mdrlat_eval::run::write(&a.out.join("snapshots.md"), &snapshots_markdown(&rows, &title))?;
     let png = a.out.join("snapshots.png");
     snapshots_chart(&rows, &name, &cpu).save_png(&png)?;
     if !a.json {
