@@ -103,8 +103,10 @@ pub struct TrainConfig {
     /// Steps between checkpoints.
     pub checkpoint_interval: u64,
     /// A checkpoint at the last step too, so that the finished run can be extended with
-    /// `--resume --steps` (false: a short run leaves its weights, `model.safetensors`, and no
-    /// optimiser state or replay: the demo's 300-step run).
+    /// `--resume --steps` (false: the finished run leaves its weights, `model.safetensors`,
+    /// and no checkpoint — no optimiser state or replay — once `RunDir::finish` has run: the
+    /// demo's 300-step run, and the `fast` sweep's 18 runs, whose replay buffers would take
+    /// 2.4 GB each). A run killed midway resumes from its last checkpoint either way.
     pub final_checkpoint: bool,
     /// How the run's final `model.safetensors` stores its weights (`f16`: half the size,
     /// the same greedy actions in practice; the demo's pipeline check writes f16).

@@ -130,6 +130,33 @@ impl RunDir {
         .map_err(|problem| TrainError::Checkpoint { path, problem })
     }
 
+    /// Ends a finished run: writes `model.safetensors` ([`RunDir::save_model`]) and, when the
+    /// run keeps no final checkpoint (`train.final_checkpoint = false`), removes every
+    /// checkpoint it wrote on the way (`checkpoint/`, and a `checkpoint.old/` or
+    /// `checkpoint.tmp/` a killed swap left): nothing is left to resume, and no replay buffer
+    /// (MDRLAT's 50k transitions: 2.4 GB) stays on the disk. The model is written first, so a
+    /// run killed in between still has its checkpoint.
+    ///
+    /// # Errors
+    /// The model cannot be written or a checkpoint folder cannot be removed.
+    pub fn finish(
+        &self,
+        learner: &Learner,
+        step: u64,
+        config: &crate::config::TrainConfig,
+    ) -> Result<(), TrainError> {
+        self.save_model(learner, step, config.model_precision)?;
+        if !config.final_checkpoint {
+            for name in ["checkpoint", "checkpoint.old", "checkpoint.tmp"] {
+                let path = self.root.join(name);
+                if path.exists() {
+                    std::fs::remove_dir_all(&path).map_err(io(&path))?;
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Writes the policy the run would ship now (the averaged network where it keeps one)
     /// as the snapshot at `minute` of training (`snapshots/minute-MMMM.MMM/model.safetensors`,
     /// see [`snapshot_name`]), recording the step, the minutes actually trained and the CPU

@@ -404,6 +404,54 @@ fn a_run_without_a_final_checkpoint_leaves_none_and_says_so() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
+/// `final_checkpoint = false` on a run long enough to checkpoint on the way: killed midway it
+/// resumes from its checkpoint; finished (`RunDir::finish`), it leaves `model.safetensors`
+/// — the policy the checkpoint held — and no checkpoint, replay or half-swapped folder.
+#[test]
+fn a_finished_run_without_a_final_checkpoint_removes_the_ones_on_the_way() {
+    let dev = Device::flex();
+    let d = dir("finish-drop");
+    let cfg = |steps| TrainConfig { final_checkpoint: false, ..config(Variant::LaserOnly, steps) };
+    // Stopped at 250 steps: its step-200 checkpoint (with the replay) is there to resume.
+    train(vec![world()], &sim(), &cfg(250), &dev, &d, false, |_| {}).expect("run");
+    assert!(d.join("checkpoint/replay.bin").is_file(), "the checkpoint on the way");
+    let (report, learner) =
+        train(vec![world()], &sim(), &cfg(300), &dev, &d, true, |_| {}).expect("resume");
+    assert_eq!(report.steps, 300);
+    assert!(d.join("checkpoint/replay.bin").is_file(), "still there before finish");
+    std::fs::create_dir_all(d.join("checkpoint.old")).expect("a killed swap's leftover");
+    let run = mdrlat_train::RunDir::at(&d);
+    run.finish(&learner, report.steps, &cfg(300)).expect("finish");
+    for gone in ["checkpoint", "checkpoint.old", "checkpoint.tmp"] {
+        assert!(!d.join(gone).exists(), "{gone} removed");
+    }
+    // The model is the finished policy, and it loads from the run folder.
+    let policy = mdrlat_train::GreedyPolicy::load(&d, &dev, 1).expect("the run's model");
+    let inputs = Inputs { size: 1, laser: vec![0.5; 4 * 512], ..Inputs::default() };
+    let from_model = policy.q_values(&inputs).expect("q");
+    let direct = learner.q_values(&inputs);
+    for (a, b) in from_model.iter().zip(&direct) {
+        assert!((a - b).abs() < 1e-5, "{from_model:?} against {direct:?}");
+    }
+    let e = train(vec![world()], &sim(), &cfg(400), &dev, &d, true, |_| {})
+        .expect_err("nothing to resume")
+        .to_string();
+    assert!(e.contains("no checkpoint"), "{e}");
+    // The default keeps the final checkpoint.
+    let kept = dir("finish-keep");
+    let (report, learner) =
+        train(vec![world()], &sim(), &config(Variant::LaserOnly, 120), &dev, &kept, false, |_| {})
+            .expect("run");
+    mdrlat_train::RunDir::at(&kept)
+        .finish(&learner, report.steps, &config(Variant::LaserOnly, 120))
+        .expect("finish");
+    assert!(
+        kept.join("checkpoint/replay.bin").is_file() && kept.join("model.safetensors").is_file()
+    );
+    let _ = std::fs::remove_dir_all(&d);
+    let _ = std::fs::remove_dir_all(&kept);
+}
+
 /// Polyak averaging of the policy (`train.average_horizon`): the averaged network is in the
 /// checkpoint and resumes exactly; it is what the run's evaluations use and what a checkpoint
 /// loads as a policy; it is not the online network. A checkpoint whose averaging does not

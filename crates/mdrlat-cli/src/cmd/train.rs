@@ -221,7 +221,7 @@ pub fn run(a: &Args) -> Result<()> {
     let (report, learner) =
         mdrlat_train::train(envs, &config.train, &device.device(), &dir, resume, on_step)?;
     pb.finish_and_clear();
-    dir.save_model(&learner, report.steps, config.train.model_precision)?;
+    dir.finish(&learner, report.steps, &config.train)?;
     let last = report.evaluations.last().map(|e| {
         let reached = if config.sim.task == Task::Nav {
             format!(", {:.0}% of goals reached", 100.0 * e.success_rate())
