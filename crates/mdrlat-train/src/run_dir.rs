@@ -9,7 +9,7 @@
 //!   eval.csv                a row every evaluation: Fig. 4 and the learning curves
 //!   events.out.tfevents.*   the same scalars for TensorBoard
 //!   checkpoint/             everything a resume needs (checkpoint::save)
-//!   model.safetensors       the online network's weights at the end (RunDir::save_model)
+//!   model.safetensors       the online network's weights at the end (RunDir::finish)
 //!   snapshots/minute-*/     the policy at fixed minutes of training (train.snapshot_minutes)
 //! ```
 
