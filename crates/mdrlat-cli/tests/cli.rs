@@ -424,7 +424,7 @@ fn eval_snapshots_measures_success_against_minutes_of_training() {
     let e = elsewhere.to_str().expect("utf8");
     assert_clean_failure(
         &mdrlat(&["eval", "--snapshots", r, "--task", "nav", "--out", e]),
-        &["--snapshots with --task nav"],
+        &["--snapshots", "trained for obstacle avoidance", "--task nav"],
     );
     assert_clean_failure(
         &mdrlat(&["eval", "--snapshots", r, "--threads", "0", "--out", e]),

@@ -91,6 +91,7 @@ fn a_goal_conditioned_network_trains_and_is_evaluated_on_navigation() {
         "train.eval_episodes=2",
         "train.checkpoint_interval=100",
         "sim.max_episode_steps=40",
+        "train.snapshot_minutes=0.001",
     ];
     for set in &sets {
         args.extend(["--set", set]);
@@ -126,6 +127,30 @@ fn a_goal_conditioned_network_trains_and_is_evaluated_on_navigation() {
     }
     let md = std::fs::read_to_string(a.join("navigation.md")).expect("navigation.md");
     assert!(md.contains("laser-only from"), "{md}");
+    // Its snapshots: goals reached against minutes of training.
+    let taken = std::fs::read_dir(run.join("snapshots")).expect("snapshots").count();
+    assert!(taken > 0);
+    let snaps = dir.join("snapshots");
+    let o = mdrlat(&[
+        "eval",
+        "--snapshots",
+        r,
+        "--task",
+        "nav",
+        "--episodes",
+        "2",
+        "--runs",
+        "1",
+        "--out",
+        snaps.to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(snaps.join("snapshots.csv")).expect("snapshots.csv");
+    assert_eq!(csv.lines().count(), 1 + taken, "{csv}");
+    assert!(csv.lines().skip(1).all(|l| l.contains(",nav-test,2,1,")), "{csv}");
+    let md = std::fs::read_to_string(snaps.join("snapshots.md")).expect("snapshots.md");
+    assert!(md.contains("Goals reached %"), "{md}");
+    assert!(snaps.join("snapshots.png").is_file());
     // The model file records the task: it, too, evaluates on navigation only.
     let bytes = std::fs::read(run.join("model.safetensors")).expect("model");
     let n = u64::from_le_bytes(bytes[..8].try_into().expect("8 bytes")) as usize;

@@ -50,7 +50,15 @@ pub fn snapshots_markdown(rows: &[SnapshotResult], title: &str) -> String {
     let worlds: Vec<&str> =
         rows.first().map_or(Vec::new(), |r| r.worlds.iter().map(|w| w.world.as_str()).collect());
     let mut out = format!("# {title}\n\n");
-    if let Some(w) = rows.first().and_then(|r| r.worlds.first()) {
+    let nav = is_navigation(rows);
+    if let Some(w) = rows.first().and_then(|r| r.worlds.first()).filter(|_| nav) {
+        out.push_str(&format!(
+            "Goals reached % (the robot's centre at its goal within {} steps: navigation, \
+             where moving success is the same), {} runs × {} episodes per world, seed {}, of \
+             the policy as it stood at each minute of training.\n\n",
+            w.max_steps, w.runs, w.episodes, w.seed
+        ));
+    } else if let Some(w) = rows.first().and_then(|r| r.worlds.first()) {
         out.push_str(&format!(
             "Moving success % (no collision in {} steps, ≥ {} m driven, ≥ {} m from the start; \
              the paper's success in brackets), {} runs × {} episodes per world, seed {}, of the \
@@ -72,21 +80,26 @@ pub fn snapshots_markdown(rows: &[SnapshotResult], title: &str) -> String {
             r.step.map_or("—".to_string(), |s| s.to_string())
         ));
         for w in &r.worlds {
-            out.push_str(&format!(
-                " {:.1} ± {:.1} ({:.1}) |",
-                100.0 * w.moving_success_mean,
-                100.0 * w.moving_success_std,
-                100.0 * w.success_mean
-            ));
+            let (mean, std) = (100.0 * w.moving_success_mean, 100.0 * w.moving_success_std);
+            if nav {
+                out.push_str(&format!(" {mean:.1} ± {std:.1} |"));
+            } else {
+                out.push_str(&format!(" {mean:.1} ± {std:.1} ({:.1}) |", 100.0 * w.success_mean));
+            }
         }
         out.push('\n');
     }
     out
 }
 
+/// Whether the snapshots were evaluated in the navigation task (success = the goal reached).
+fn is_navigation(rows: &[SnapshotResult]) -> bool {
+    rows.iter().flat_map(|r| &r.worlds).any(|w| w.navigation)
+}
+
 /// The figure: moving success (± std over runs) against minutes of training, a line per
-/// world, and beside it the paper's success the same way; `run` and the training `cpu` in
-/// the titles.
+/// world, and beside it the paper's success the same way (navigation: the goals reached, one
+/// panel); `run` and the training `cpu` in the titles.
 pub fn snapshots_chart(rows: &[SnapshotResult], run: &str, cpu: &str) -> Image {
     let worlds: Vec<String> =
         rows.first().map_or(Vec::new(), |r| r.worlds.iter().map(|w| w.world.clone()).collect());
@@ -119,10 +132,17 @@ pub fn snapshots_chart(rows: &[SnapshotResult], run: &str, cpu: &str) -> Image {
             })
             .collect()
     };
+    let x_label = "minutes of training";
+    if is_navigation(rows) {
+        // Navigation: success is the goal reached, moving success the same; one panel.
+        let title = format!("Goals reached by {run}'s snapshots; trained on {cpu}");
+        let series = series(true);
+        let chart = Chart { title: &title, x_label, y_label: "% of episodes", series: &series };
+        return line_chart(&chart, 1000, 620);
+    }
     let (moving, paper) = (series(true), series(false));
     let moving_title = format!("Moving success of {run}'s snapshots");
     let paper_title = format!("The paper's success; trained on {cpu}");
-    let x_label = "minutes of training";
     let left = line_chart(
         &Chart { title: &moving_title, x_label, y_label: "% of episodes", series: &moving },
         1000,
@@ -199,5 +219,35 @@ mod tests {
         assert!(md.contains("| 4 | — | 50.0 ± 2.0 (75.0) |"), "{md}");
         let img = snapshots_chart(&rows, "run", "cpu");
         assert_eq!((img.width, img.height), (2016, 620));
+    }
+
+    #[test]
+    fn navigation_snapshots_are_goals_reached_in_one_panel() {
+        let nav =
+            |moving: f64| WorldSummary { navigation: true, ..summary("nav-test", moving, moving) };
+        let rows = vec![
+            SnapshotResult {
+                minute: 10.0,
+                training_minutes: None,
+                step: Some(22_000),
+                worlds: vec![nav(0.08)],
+            },
+            SnapshotResult {
+                minute: 20.0,
+                training_minutes: None,
+                step: Some(44_000),
+                worlds: vec![nav(0.5)],
+            },
+        ];
+        let md = snapshots_markdown(&rows, "nav run");
+        assert!(md.contains("Goals reached %"), "{md}");
+        assert!(md.contains("| 10 | 22000 | 8.0 ± 2.0 |"), "{md}");
+        assert!(!md.contains("(8.0)") && !md.contains("Moving success %"), "{md}");
+        let img = snapshots_chart(&rows, "run", "cpu");
+        assert_eq!((img.width, img.height), (1000, 620));
+        // The same rows in avoidance: both measures, two panels.
+        let avoid =
+            vec![SnapshotResult { worlds: vec![summary("office", 0.5, 0.75)], ..rows[0].clone() }];
+        assert_eq!(snapshots_chart(&avoid, "run", "cpu").width, 2016);
     }
 }

@@ -102,7 +102,7 @@ fn spinning_and_circling_score_by_the_papers_measure_and_zero_by_the_moving_one(
         let w = world(name);
         for p in [Scripted::Spin, Scripted::Circle] {
             let e = eval(&w, p, &settings);
-            let s = WorldSummary::new(p.name(), &e, &settings);
+            let s = WorldSummary::new(&p.name(), &e, &settings);
             assert_eq!(s.moving_success_mean, 0.0, "{name} {p:?}: {s:?}");
             // Turning in place never collides (walkers yield to the robot); circling does
             // where a start lies within its 0.76 m circle of a wall, but not always.

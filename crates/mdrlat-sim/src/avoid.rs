@@ -115,12 +115,15 @@ impl AvoidConfig {
 
     /// The name of the avoider these settings make: `avoid`, `avoid-laser` (no camera),
     /// `avoid-stack` (memory of the frame stack only), `avoid-laser-stack`.
-    pub fn name(&self) -> &'static str {
-        match (self.depth, self.memory_steps <= Self::STACK_MEMORY_STEPS) {
-            (true, false) => "avoid",
-            (false, false) => "avoid-laser",
-            (true, true) => "avoid-stack",
-            (false, true) => "avoid-laser-stack",
+    /// Other memories with the camera are `avoid-memory-N` (N frames remembered).
+    pub fn name(&self) -> String {
+        let default = Self::default().memory_steps;
+        match (self.depth, self.memory_steps) {
+            (true, m) if m == default => "avoid".into(),
+            (false, m) if m > Self::STACK_MEMORY_STEPS => "avoid-laser".into(),
+            (true, Self::STACK_MEMORY_STEPS) => "avoid-stack".into(),
+            (false, _) => "avoid-laser-stack".into(),
+            (true, m) => format!("avoid-memory-{}", m + 1),
         }
     }
 }
@@ -558,7 +561,7 @@ impl AvoidPolicy {
 
 impl Policy for AvoidPolicy {
     fn name(&self) -> String {
-        self.config.name().into()
+        self.config.name()
     }
     fn sensors(&self) -> Sensors {
         Sensors { laser: true, depth: self.config.depth }
@@ -661,5 +664,22 @@ mod tests {
         assert_eq!(name, "avoid");
         let laser = AvoidConfig { depth: false, ..AvoidConfig::default() };
         assert_eq!(laser.name(), "avoid-laser");
+        // `avoid-memory-N`: the last N frames, nothing older.
+        let eight: crate::Scripted = "avoid-memory-8".parse().expect("parses");
+        assert_eq!(eight, crate::Scripted::AvoidMemory(8));
+        assert_eq!(eight.name(), "avoid-memory-8");
+        let (age, name) = oldest(AvoidConfig { memory_steps: 7, ..AvoidConfig::default() });
+        assert!(age <= 7 && age > AvoidConfig::STACK_MEMORY_STEPS, "kept {age} steps");
+        assert_eq!(name, "avoid-memory-8");
+        let sim = crate::SimConfig::default();
+        assert_eq!(eight.build(&sim, 0).name(), "avoid-memory-8");
+        let four: crate::Scripted = "avoid-memory-4".parse().expect("parses");
+        assert_eq!(four.build(&sim, 0).name(), "avoid-stack", "the same policy as avoid-stack");
+        for bad in ["avoid-memory-0", "avoid-memory-1001", "avoid-memory-x", "avoid-memory-"] {
+            let e = bad.parse::<crate::Scripted>().expect_err(bad);
+            assert!(e.contains(bad) && e.contains("N from 1 to 1000"), "{e}");
+        }
+        let e = "avoid-mem".parse::<crate::Scripted>().expect_err("unknown");
+        assert!(e.contains("avoid-memory-N"), "{e}");
     }
 }

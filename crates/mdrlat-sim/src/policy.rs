@@ -39,6 +39,10 @@ pub enum Scripted {
     /// seen in the last four frames (the frame stack), nothing older. Against `avoid`, what
     /// the memory is worth in a world, so what a reactive policy can be asked for there.
     AvoidStack,
+    /// The same avoider remembering the cells seen in its last N frames (`avoid-memory-N`,
+    /// N from 1 to [`Scripted::MAX_MEMORY_FRAMES`]; `avoid-stack` is N = 4): success against
+    /// N says how much memory a world asks of a reactive policy.
+    AvoidMemory(u16),
 }
 
 impl Scripted {
@@ -55,8 +59,20 @@ impl Scripted {
         Scripted::AvoidStack,
     ];
 
+    /// The most frames `avoid-memory-N` remembers (the avoider's own default memory, 101
+    /// frames, is `avoid`).
+    pub const MAX_MEMORY_FRAMES: u16 = 1000;
+
     /// The name used on the command line and in reports.
-    pub fn name(self) -> &'static str {
+    pub fn name(self) -> String {
+        match self {
+            Scripted::AvoidMemory(frames) => format!("avoid-memory-{frames}"),
+            fixed => fixed.fixed_name().to_string(),
+        }
+    }
+
+    /// The name of a policy without a parameter (`avoid-memory-N`: its family's).
+    fn fixed_name(self) -> &'static str {
         match self {
             Scripted::Random => "random",
             Scripted::Forward => "forward",
@@ -67,6 +83,7 @@ impl Scripted {
             Scripted::Avoid => "avoid",
             Scripted::AvoidLaser => "avoid-laser",
             Scripted::AvoidStack => "avoid-stack",
+            Scripted::AvoidMemory(_) => "avoid-memory-N",
         }
     }
 
@@ -88,7 +105,8 @@ impl Scripted {
             | Scripted::WanderLaser
             | Scripted::Avoid
             | Scripted::AvoidLaser
-            | Scripted::AvoidStack => None,
+            | Scripted::AvoidStack
+            | Scripted::AvoidMemory(_) => None,
         }
     }
 
@@ -97,7 +115,7 @@ impl Scripted {
     pub fn build(self, config: &SimConfig, seed: u64) -> Box<dyn Policy> {
         let laser = Laser::new(&config.laser);
         if let Some(action) = self.constant_action() {
-            return Box::new(ConstantPolicy::named(action, self.name()));
+            return Box::new(ConstantPolicy::named(action, self.fixed_name()));
         }
         match self {
             Scripted::Random => Box::new(RandomPolicy::new(seed)),
@@ -110,11 +128,15 @@ impl Scripted {
                 config.robot.body_height_m,
             )),
             Scripted::WanderLaser => Box::new(WanderPolicy::new(laser.angles())),
-            Scripted::Avoid | Scripted::AvoidLaser | Scripted::AvoidStack => {
-                let memory_steps = if self == Scripted::AvoidStack {
-                    crate::AvoidConfig::STACK_MEMORY_STEPS
-                } else {
-                    crate::AvoidConfig::default().memory_steps
+            Scripted::Avoid
+            | Scripted::AvoidLaser
+            | Scripted::AvoidStack
+            | Scripted::AvoidMemory(_) => {
+                let memory_steps = match self {
+                    Scripted::AvoidStack => crate::AvoidConfig::STACK_MEMORY_STEPS,
+                    // Frames remembered: the newest and the N − 1 before it.
+                    Scripted::AvoidMemory(frames) => u32::from(frames.max(1)) - 1,
+                    _ => crate::AvoidConfig::default().memory_steps,
                 };
                 let settings = crate::AvoidConfig {
                     depth: self != Scripted::AvoidLaser,
@@ -133,8 +155,20 @@ impl Scripted {
 impl std::str::FromStr for Scripted {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Scripted::ALL.into_iter().find(|p| p.name() == s).ok_or_else(|| {
-            let names: Vec<&str> = Scripted::ALL.iter().map(|p| p.name()).collect();
+        if let Some(n) = s.strip_prefix("avoid-memory-") {
+            return match n.parse::<u16>() {
+                Ok(frames) if (1..=Scripted::MAX_MEMORY_FRAMES).contains(&frames) => {
+                    Ok(Scripted::AvoidMemory(frames))
+                }
+                _ => Err(format!(
+                    "policy '{s}': avoid-memory-N remembers the last N frames, N from 1 to {}",
+                    Scripted::MAX_MEMORY_FRAMES
+                )),
+            };
+        }
+        Scripted::ALL.into_iter().find(|p| p.fixed_name() == s).ok_or_else(|| {
+            let mut names: Vec<&str> = Scripted::ALL.iter().map(|p| p.fixed_name()).collect();
+            names.push("avoid-memory-N");
             format!("unknown policy '{s}' (scripted policies: {})", names.join(", "))
         })
     }

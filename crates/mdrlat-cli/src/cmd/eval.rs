@@ -32,15 +32,16 @@ pub struct Args {
     checkpoint: Option<PathBuf>,
     /// Every snapshot of a run (`train.snapshot_minutes`: the policy at fixed minutes of
     /// training), each by the whole protocol into --out/minute-*/, then success against
-    /// minutes: --out/snapshots.csv, snapshots.md and snapshots.png.
+    /// minutes: --out/snapshots.csv, snapshots.md and snapshots.png (with `--task nav`, of a
+    /// navigation run: goals reached against minutes).
     #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["policy", "checkpoint"])]
     snapshots: Option<PathBuf>,
     /// A policy that needs no training instead: random, forward, wander, wander-laser, spin,
     /// circle, avoid, avoid-laser or avoid-stack (`wander` and the classical `avoid` are the
     /// non-learned baseline rows; `avoid-laser`, the avoider on the laser alone, is the
     /// laser-only rows' one beside the six methods; `avoid-stack` remembers only the last
-    /// four frames, what a network sees; `spin` and `circle` game the paper's success, never the moving
-    /// one); with `--task nav`, `planner` (the paper's move_base: A* on a laser-plane map of
+    /// four frames, what a network sees, and `avoid-memory-N` the last N; `spin` and `circle`
+    /// game the paper's success, never the moving one); with `--task nav`, `planner` (the paper's move_base: A* on a laser-plane map of
     /// the world + DWA) or `planner-body` (its map holds everything the body can hit).
     #[arg(long, value_parser = super::parse_policy)]
     policy: Option<PolicyArg>,
@@ -337,12 +338,6 @@ fn run_snapshots(
     config: &Config,
     worlds: &[mdrlat_world::World],
 ) -> Result<()> {
-    if config.sim.task == Task::Nav {
-        bail!(
-            "--snapshots with --task nav: success against minutes is drawn for obstacle \
-             avoidance only; evaluate a navigation run's snapshots one by one with --checkpoint"
-        );
-    }
     let snapshots = snapshots_of(run)?;
     // Every folder checked before the first evaluation, not after some are done; with
     // --overwrite, an earlier evaluation's folders of snapshots that no longer exist go.

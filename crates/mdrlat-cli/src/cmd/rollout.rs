@@ -43,9 +43,8 @@ pub struct Args {
     /// Consecutive episodes (the random streams continue from one to the next).
     #[arg(long, default_value_t = 1)]
     episodes: u32,
-    /// Who drives: random, forward, wander, wander-laser, spin, circle, avoid, avoid-laser or
-    /// avoid-stack; with
-    /// `--task nav` also planner or planner-body (A* + DWA, see `mdrlat eval`).
+    /// Who drives: random, forward, wander, wander-laser, spin, circle, avoid, avoid-laser,
+    /// avoid-stack or avoid-memory-N; with `--task nav` also planner or planner-body (A* + DWA, see `mdrlat eval`).
     #[arg(long, default_value = "random", value_parser = super::parse_policy)]
     policy: super::PolicyArg,
     /// The task, and a fixed start and goal for navigation.
