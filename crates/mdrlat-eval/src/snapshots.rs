@@ -51,19 +51,24 @@ pub fn snapshots_markdown(rows: &[SnapshotResult], title: &str) -> String {
         rows.first().map_or(Vec::new(), |r| r.worlds.iter().map(|w| w.world.as_str()).collect());
     let mut out = format!("# {title}\n\n");
     let nav = is_navigation(rows);
-    if let Some(w) = rows.first().and_then(|r| r.worlds.first()).filter(|_| nav) {
+    if let Some(w) = rows.first().and_then(|r| r.worlds.first()) {
+        let measure = if nav {
+            format!(
+                "Goals reached % (the robot's centre at its goal within {} steps: navigation, \
+                 where moving success is the same)",
+                w.max_steps
+            )
+        } else {
+            format!(
+                "Moving success % (no collision in {} steps, ≥ {} m driven, ≥ {} m from the \
+                 start; the paper's success in brackets)",
+                w.max_steps, w.min_path_m, w.min_reach_m
+            )
+        };
         out.push_str(&format!(
-            "Goals reached % (the robot's centre at its goal within {} steps: navigation, \
-             where moving success is the same), {} runs × {} episodes per world, seed {}, of \
-             the policy as it stood at each minute of training.\n\n",
-            w.max_steps, w.runs, w.episodes, w.seed
-        ));
-    } else if let Some(w) = rows.first().and_then(|r| r.worlds.first()) {
-        out.push_str(&format!(
-            "Moving success % (no collision in {} steps, ≥ {} m driven, ≥ {} m from the start; \
-             the paper's success in brackets), {} runs × {} episodes per world, seed {}, of the \
-             policy as it stood at each minute of training.\n\n",
-            w.max_steps, w.min_path_m, w.min_reach_m, w.runs, w.episodes, w.seed
+            "{measure}, {} runs × {} episodes per world, seed {}, of the policy as it stood at \
+             each minute of training.\n\n",
+            w.runs, w.episodes, w.seed
         ));
     }
     out.push_str("| minute | step |");

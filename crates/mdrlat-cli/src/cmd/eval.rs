@@ -41,8 +41,9 @@ pub struct Args {
     /// non-learned baseline rows; `avoid-laser`, the avoider on the laser alone, is the
     /// laser-only rows' one beside the six methods; `avoid-stack` remembers only the last
     /// four frames, what a network sees, and `avoid-memory-N` the last N; `spin` and `circle`
-    /// game the paper's success, never the moving one); with `--task nav`, `planner` (the paper's move_base: A* on a laser-plane map of
-    /// the world + DWA) or `planner-body` (its map holds everything the body can hit).
+    /// game the paper's success, never the moving one); with `--task nav`, `planner` (the
+    /// paper's move_base: A* on a laser-plane map of the world + DWA) or `planner-body` (its
+    /// map holds everything the body can hit).
     #[arg(long, value_parser = super::parse_policy)]
     policy: Option<PolicyArg>,
     /// World to evaluate in (repeatable): a built-in name, a .toml world file or a

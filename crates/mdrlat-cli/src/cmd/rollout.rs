@@ -44,7 +44,8 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     episodes: u32,
     /// Who drives: random, forward, wander, wander-laser, spin, circle, avoid, avoid-laser,
-    /// avoid-stack or avoid-memory-N; with `--task nav` also planner or planner-body (A* + DWA, see `mdrlat eval`).
+    /// avoid-stack or avoid-memory-N; with `--task nav` also planner or planner-body (A* +
+    /// DWA, see `mdrlat eval`).
     #[arg(long, default_value = "random", value_parser = super::parse_policy)]
     policy: super::PolicyArg,
     /// The task, and a fixed start and goal for navigation.
