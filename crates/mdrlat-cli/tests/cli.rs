@@ -353,6 +353,26 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
         &["train.batch_size"],
     );
     assert_clean_failure(&mdrlat(&["train", "--out", o, "--set", "train.lr=0.1"]), &["lr"]);
+    // A warm start from the run's model: checked before the run directory exists, and
+    // recorded in its config.
+    let warm = d.join("warm");
+    let w = warm.to_str().expect("utf8");
+    let model = run.join("model.safetensors");
+    let from = |m: &str, v: &str| {
+        let steps = ["--steps", "30", "--set", "sim.max_episode_steps=30"];
+        let base = ["train", "--variant", v, "--world", "example", "--init-from", m, "--out", w];
+        mdrlat(&[&base[..], &steps[..]].concat())
+    };
+    assert_clean_failure(&from("nowhere", "laser-only"), &["train.init_from", "nowhere"]);
+    let o = from(model.to_str().expect("utf8"), "mdrlat");
+    assert_clean_failure(&o, &["train.init_from", "laser-only network", "trains a mdrlat"]);
+    assert!(!warm.exists(), "no run directory for a bad warm start");
+    let o = from(model.to_str().expect("utf8"), "laser-only");
+    let said = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success() && said.contains("warm start from"), "{}", stderr(&o));
+    let cfg = std::fs::read_to_string(warm.join("config.toml")).expect("config");
+    assert!(cfg.contains("init_from = ") && cfg.contains("model.safetensors"), "{cfg}");
+    assert!(!std::fs::read_to_string(run.join("config.toml")).expect("cfg").contains("init_from"));
 }
 
 /// `train.snapshot_minutes` and `mdrlat eval --snapshots`: every snapshot by the protocol,

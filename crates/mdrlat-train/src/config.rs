@@ -122,6 +122,16 @@ pub struct TrainConfig {
     /// between ticks (`train.envs` steps), so an interval shorter than a tick skips some.
     /// 0 or 0.001 to 10,000.
     pub snapshot_minutes: f64,
+    /// A warm start (empty: none, the paper's fresh initialisation): the run's online and
+    /// target networks start from this trained model's weights instead of the seed's — a
+    /// shipped model's folder or `.safetensors` file (f32 or f16), a run directory or a
+    /// checkpoint folder (its averaged network where it keeps one), of the same variant and
+    /// task. Only the weights: the replay buffer starts empty (`learning_starts` applies),
+    /// both Adams start from zero moments, ε follows its schedule from `epsilon_start`, the
+    /// averaged network starts anew, and steps count from 0. A resumed run ignores it (its
+    /// checkpoint holds the weights). Written to `config.toml` only when set.
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub init_from: String,
 }
 
 /// Gradient steps between two moves of the averaged network ([`TrainConfig::average_horizon`]).
@@ -163,6 +173,7 @@ impl Default for TrainConfig {
             final_checkpoint: true,
             model_precision: Precision::F32,
             snapshot_minutes: 0.0,
+            init_from: String::new(),
         }
     }
 }

@@ -63,6 +63,14 @@ pub enum TrainError {
         /// What is wrong.
         problem: String,
     },
+    /// The model a run starts from (`train.init_from`) cannot be used.
+    #[error("train.init_from '{path}': {problem}")]
+    InitFrom {
+        /// The model as given.
+        path: String,
+        /// What is wrong.
+        problem: String,
+    },
     /// A file could not be written.
     #[error("{path}: {source}")]
     Io {

@@ -3,6 +3,7 @@
 
 use crate::adam::{AdamCounts, FusedAdam};
 use crate::config::{AVERAGE_EVERY, AuxOptimizer, TrainConfig};
+use crate::error::TrainError;
 use crate::replay::{Batch, DepthLayout};
 use mdrlat_core::{
     Action, DEPTH_COLS, DEPTH_ROWS, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY, PolicyError,
@@ -256,6 +257,31 @@ pub fn read_net(net: &mut QNet, path: &Path, variant: Variant) -> Result<(), Str
 /// The settings of a `variant` network for `task` (a goal input for navigation).
 pub fn net_config(variant: Variant, task: Task) -> QNetConfig {
     QNetConfig::new(variant).with_goal_dim(task.goal_dim())
+}
+
+/// The weights a warm-started run begins with (`train.init_from`, which must be set), on
+/// `device`, and where they came from: the model must be a `config.variant` network for
+/// `task`. Callers check it before creating a run directory; [`Learner::warm_start`]
+/// loads it.
+///
+/// # Errors
+/// No model there, or one of another variant or task.
+pub fn init_weights(
+    config: &TrainConfig,
+    task: Task,
+    device: &Device,
+) -> Result<(QNet, String), TrainError> {
+    let err = |problem| TrainError::InitFrom { path: config.init_from.clone(), problem };
+    let (net_config, net, source) =
+        crate::policy::load_weights(Path::new(&config.init_from), device).map_err(err)?;
+    let model_task = Task::of_goal_dim(net_config.goal_dim);
+    if net_config.variant != config.variant || model_task != task {
+        return Err(err(format!(
+            "the model is a {} network for {model_task}; this run trains a {} network for {task}",
+            net_config.variant, config.variant
+        )));
+    }
+    Ok((net, source))
 }
 
 /// Loads every tensor of `store` into `net`; a file that does not fit the variant exactly
@@ -990,6 +1016,20 @@ impl Learner {
         }
         learner.updates = updates;
         Ok(learner)
+    }
+
+    /// A warm start (`train.init_from`): the online, acting and target networks take the
+    /// weights of the trained model `config.init_from` (see [`init_weights`]); the
+    /// optimisers and the averaged network stay fresh. Returns where the weights came from.
+    ///
+    /// # Errors
+    /// No model there, or one of another variant or task.
+    pub fn warm_start(&mut self, config: &TrainConfig) -> Result<String, TrainError> {
+        let (net, source) = init_weights(config, self.task(), &self.train_device)?;
+        self.online = net;
+        self.plain = self.online.valid();
+        self.target = self.plain.clone();
+        Ok(source)
     }
 
     /// Lines 16–17: θ⁻ ← θ.

@@ -141,6 +141,43 @@ fn shown(path: &Path) -> String {
         .to_string()
 }
 
+/// The network a trained model stands for, on `device` (with autodiff, for a warm start
+/// that trains on from it; without, to act): a run's checkpoint (`path`: a run directory or
+/// a checkpoint folder) gives its averaged network where the run keeps one
+/// (`train.average_horizon`), else its online network; a model file (`path`: a
+/// `.safetensors` file written by [`crate::export::save_safetensors_as`], f32 or f16, or a
+/// folder holding `model.safetensors` and no checkpoint) gives its weights. Also returns
+/// the network's settings and how to name where it came from.
+///
+/// # Errors
+/// No checkpoint or model, an unreadable or corrupt `meta.json`, another format, or weights
+/// that do not fit the variant it names.
+pub fn load_weights(path: &Path, device: &Device) -> Result<(QNetConfig, QNet, String), String> {
+    if let Some(model) = model_file(path) {
+        let (config, net, meta) = crate::export::load_safetensors(&model, device)?;
+        // A snapshot (train.snapshot_minutes) also says when it was taken.
+        let minutes = meta
+            .get("mdrlat_training_minutes")
+            .map_or(String::new(), |m| format!(", {m} minutes of training"));
+        let step =
+            meta.get("mdrlat_step").map_or(String::new(), |s| format!(" (step {s}{minutes})"));
+        return Ok((config, net, format!("{}{step}", shown(&model))));
+    }
+    let dir = checkpoint_dir(path)?;
+    let meta = read_meta(&dir).map_err(|e| e.to_string())?;
+    let config = net_config(meta.variant, meta.task);
+    let mut net = config.init(device);
+    // A run that keeps an average of its weights acts by it (train.average_horizon).
+    let averaged = dir.join(crate::learner::AVERAGE_FILE);
+    let (file, which) = if averaged.is_file() {
+        (averaged, ", averaged network")
+    } else {
+        (dir.join("online.bpk"), "")
+    };
+    read_net(&mut net, &file, meta.variant)?;
+    Ok((config, net, format!("{} (step {}{which})", shown(&dir), meta.step)))
+}
+
 impl GreedyPolicy {
     /// The policy of a run's checkpoint (`path`: a run directory or a checkpoint folder): its
     /// averaged network where the run keeps one (`train.average_horizon`), else its online
@@ -152,41 +189,8 @@ impl GreedyPolicy {
     /// No checkpoint or model, an unreadable or corrupt `meta.json`, another format, or weights that
     /// do not fit the variant it names.
     pub fn load(path: &Path, device: &Device, threads: usize) -> Result<Self, String> {
-        if let Some(model) = model_file(path) {
-            let (config, net, meta) = crate::export::load_safetensors(&model, device)?;
-            // A snapshot (train.snapshot_minutes) also says when it was taken.
-            let minutes = meta
-                .get("mdrlat_training_minutes")
-                .map_or(String::new(), |m| format!(", {m} minutes of training"));
-            let step =
-                meta.get("mdrlat_step").map_or(String::new(), |s| format!(" (step {s}{minutes})"));
-            return Self::from_net(
-                config,
-                net,
-                device,
-                threads,
-                format!("{}{step}", shown(&model)),
-            );
-        }
-        let dir = checkpoint_dir(path)?;
-        let meta = read_meta(&dir).map_err(|e| e.to_string())?;
-        let config = net_config(meta.variant, meta.task);
-        let mut net = config.init(device);
-        // A run that keeps an average of its weights acts by it (train.average_horizon).
-        let averaged = dir.join(crate::learner::AVERAGE_FILE);
-        let (file, which) = if averaged.is_file() {
-            (averaged, ", averaged network")
-        } else {
-            (dir.join("online.bpk"), "")
-        };
-        read_net(&mut net, &file, meta.variant)?;
-        Self::from_net(
-            config,
-            net,
-            device,
-            threads,
-            format!("{} (step {}{which})", shown(&dir), meta.step),
-        )
+        let (config, net, source) = load_weights(path, device)?;
+        Self::from_net(config, net, device, threads, source)
     }
 
     /// A freshly initialised `variant` network of `task` (seeded), for testing a deployment

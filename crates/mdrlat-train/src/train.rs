@@ -94,7 +94,11 @@ pub fn train(
         envs.start(config.seed, &mut replay)?;
         let run = envs.fresh_meta(config, task);
         let sink = MetricsSink::create(dir)?;
-        (Learner::new(config, task, device), replay, run, sink)
+        let mut learner = Learner::new(config, task, device);
+        if !config.init_from.is_empty() {
+            learner.warm_start(config)?;
+        }
+        (learner, replay, run, sink)
     };
     // The training clock: the checkpoint's seconds (or its TensorBoard time, for one written
     // before the clock file), then this process's from here on.

@@ -176,6 +176,52 @@ fn a_navigation_run_resumes_exactly_and_only_as_navigation() {
     }
 }
 
+/// A warm start (`train.init_from`) begins from a trained model's weights — a run directory
+/// or its `model.safetensors` — and learns on from them with a fresh replay buffer; a model
+/// of another variant or task, or none, is a clear error naming it.
+#[test]
+fn a_warm_start_begins_from_the_models_weights() {
+    let dev = Device::flex();
+    let source = dir("warm-source");
+    let (_, a) = laser_only(world(), &sim(), 200, &source, false).expect("run");
+    mdrlat_train::RunDir::at(&source)
+        .finish(&a, 200, &config(Variant::LaserOnly, 200))
+        .expect("model");
+    let fresh = |steps| TrainConfig { seed: 9, ..config(Variant::LaserOnly, steps) };
+    let warm =
+        |from: &Path, steps| TrainConfig { init_from: from.display().to_string(), ..fresh(steps) };
+    // 40 steps: fewer than learning_starts (50), so no gradient step has moved it yet.
+    for from in [source.clone(), source.join("model.safetensors")] {
+        let out = dir("warm-0");
+        let (report, b) = train(vec![world()], &sim(), &warm(&from, 40), &dev, &out, false, |_| {})
+            .expect("warm");
+        assert_eq!((report.steps, report.updates), (40, 0));
+        assert_eq!(probe(&a), probe(&b), "the model's weights, from {}", from.display());
+    }
+    // With gradient steps it learns on: neither the model nor the seed's fresh network.
+    let out = dir("warm-1");
+    let (report, b) =
+        train(vec![world()], &sim(), &warm(&source, 120), &dev, &out, false, |_| {}).expect("warm");
+    assert!(report.updates > 0);
+    let (_, c) = train(vec![world()], &sim(), &fresh(120), &dev, &dir("warm-2"), false, |_| {})
+        .expect("fresh");
+    assert!(probe(&b) != probe(&a) && probe(&b) != probe(&c));
+    // Models of another task or variant, and none, are errors naming train.init_from.
+    let bad = |cfg: &TrainConfig, sim: &SimConfig, world| {
+        train(vec![world], sim, cfg, &dev, &dir("warm-bad"), false, |_| {})
+            .expect_err("bad model")
+            .to_string()
+    };
+    let nav = SimConfig { task: mdrlat_sim::config::Task::Nav, ..sim() };
+    let nav_world = mdrlat_world::builtin::get("nav-train").expect("builtin").expect("valid");
+    let e = bad(&warm(&source, 40), &nav, nav_world);
+    assert!(e.contains("train.init_from") && e.contains("laser-only network for avoid"), "{e}");
+    let e = bad(&TrainConfig { variant: Variant::Mdrlat, ..warm(&source, 40) }, &sim(), world());
+    assert!(e.contains("train.init_from") && e.contains("trains a mdrlat network"), "{e}");
+    let e = bad(&warm(&source.join("nothing"), 40), &sim(), world());
+    assert!(e.contains("train.init_from") && e.contains("no such run directory"), "{e}");
+}
+
 #[test]
 fn bad_checkpoints_are_clear_errors_never_a_fresh_start() {
     let dev = Device::flex();

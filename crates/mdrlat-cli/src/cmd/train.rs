@@ -85,11 +85,16 @@ pub struct Args {
     out: Option<PathBuf>,
     /// Continue the run in this directory exactly from its last checkpoint (its saved
     /// config and world; `--steps` may extend it).
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["variant", "world", "seed", "config", "sets", "device", "task", "start", "goal", "preset"])]
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["variant", "world", "seed", "config", "init_from", "sets", "device", "task", "start", "goal", "preset"])]
     resume: Option<PathBuf>,
     /// Configuration file (see `mdrlat config default`).
     #[arg(long)]
     config: Option<PathBuf>,
+    /// Warm start: begin from this trained model's weights (a models/ folder, a
+    /// .safetensors file, a run directory or a checkpoint) of the same variant and task,
+    /// with an empty replay buffer and fresh optimisers (`train.init_from`)
+    #[arg(long, value_name = "MODEL")]
+    init_from: Option<PathBuf>,
     /// Override any setting: `--set train.gamma=0.95 --set sim.laser.noise_std_m=0.01`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     sets: Vec<String>,
@@ -125,6 +130,7 @@ impl Args {
             out: Some(t.out.clone()),
             resume: None,
             config: None,
+            init_from: None,
             sets: t.sets.clone(),
             device: Some(device),
         })
@@ -142,6 +148,7 @@ impl Args {
             out: None,
             resume: Some(dir.to_path_buf()),
             config: None,
+            init_from: None,
             sets: Vec::new(),
             device: None,
         }
@@ -172,8 +179,20 @@ pub fn run(a: &Args) -> Result<()> {
             if let Some(s) = a.seed {
                 config.train.seed = s;
             }
+            if let Some(m) = &a.init_from {
+                config.train.init_from = m.display().to_string();
+            }
             a.task.apply(&mut config.sim)?;
             config.validate("--variant, --steps, --seed or --task")?;
+            // A warm start's model is checked before the run directory exists.
+            if !config.train.init_from.is_empty() {
+                let (_, source) = mdrlat_train::init_weights(
+                    &config.train,
+                    config.sim.task,
+                    &mdrlat_nn::burn::prelude::Device::flex(),
+                )?;
+                out!("warm start from {source}");
+            }
             let device = a.device.unwrap_or(DeviceKind::Cpu);
             let default_world = a.preset.default_world(config.sim.task);
             let world = a.world.clone().unwrap_or_else(|| default_world.into());
