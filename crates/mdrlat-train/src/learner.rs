@@ -1020,16 +1020,15 @@ impl Learner {
 
     /// A warm start (`train.init_from`): the online, acting and target networks take the
     /// weights of the trained model `config.init_from` (see [`init_weights`]); the
-    /// optimisers and the averaged network stay fresh. Returns where the weights came from.
+    /// optimisers and the averaged network stay fresh.
     ///
     /// # Errors
     /// No model there, or one of another variant or task.
-    pub fn warm_start(&mut self, config: &TrainConfig) -> Result<String, TrainError> {
-        let (net, source) = init_weights(config, self.task(), &self.train_device)?;
-        self.online = net;
+    pub fn warm_start(&mut self, config: &TrainConfig) -> Result<(), TrainError> {
+        (self.online, _) = init_weights(config, self.task(), &self.train_device)?;
         self.plain = self.online.valid();
         self.target = self.plain.clone();
-        Ok(source)
+        Ok(())
     }
 
     /// Lines 16–17: θ⁻ ← θ.
