@@ -90,14 +90,15 @@ pub fn train(
         let sink = MetricsSink::resume(dir, run.step, config.total_steps)?;
         (learner, replay, run, sink)
     } else {
-        let mut replay = empty_replay(config, task);
-        envs.start(config.seed, &mut replay)?;
-        let run = envs.fresh_meta(config, task);
-        let sink = MetricsSink::create(dir)?;
+        // A warm start's model is read first: a bad one stops the run before it writes.
         let mut learner = Learner::new(config, task, device);
         if !config.init_from.is_empty() {
             learner.warm_start(config)?;
         }
+        let mut replay = empty_replay(config, task);
+        envs.start(config.seed, &mut replay)?;
+        let run = envs.fresh_meta(config, task);
+        let sink = MetricsSink::create(dir)?;
         (learner, replay, run, sink)
     };
     // The training clock: the checkpoint's seconds (or its TensorBoard time, for one written
