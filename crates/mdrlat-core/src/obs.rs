@@ -155,6 +155,12 @@ impl FrameStack {
         self.frame(FRAME_STACK - 1)
     }
 
+    /// The newest frame, to be changed in place.
+    pub fn latest_mut(&mut self) -> &mut [f32] {
+        let n = self.frame_len;
+        &mut self.data[self.head * n..(self.head + 1) * n]
+    }
+
     /// The stack oldest-first as one new vector (`FRAME_STACK * frame_len` values), copied
     /// frame by frame: new memory is not zeroed first.
     pub fn to_stacked_vec(&self) -> Vec<f32> {

@@ -200,6 +200,17 @@ pub struct LaserConfig {
     pub max_range_m: f32,
     /// Standard deviation of additive Gaussian range noise, metres (0: off).
     pub noise_std_m: f32,
+    /// Frames of the depth camera's obstacles hidden from the laser (low boxes, table tops,
+    /// overhangs) remembered by odometry and drawn into the scan the policy reads, the
+    /// current frame included (0: off, the paper's scan; at most 64). The collision rule
+    /// and the reward still read the laser alone. See `ScanMemory`. Written to
+    /// `config.toml` only when set.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub depth_memory_frames: u32,
+}
+
+fn is_zero(v: &u32) -> bool {
+    *v == 0
 }
 
 impl Default for LaserConfig {
@@ -209,6 +220,7 @@ impl Default for LaserConfig {
             height_m: 0.40,
             max_range_m: mdrlat_core::LASER_MAX_RANGE_M,
             noise_std_m: 0.0,
+            depth_memory_frames: 0,
         }
     }
 }
@@ -349,6 +361,16 @@ impl SimConfig {
             return Err(ConfigError {
                 field: "max_episode_steps",
                 problem: "must be at least 1".into(),
+            });
+        }
+        if self.laser.depth_memory_frames > crate::sensors::MAX_MEMORY_FRAMES {
+            return Err(ConfigError {
+                field: "laser.depth_memory_frames",
+                problem: format!(
+                    "must be 0 (off) to {}, got {}",
+                    crate::sensors::MAX_MEMORY_FRAMES,
+                    self.laser.depth_memory_frames
+                ),
             });
         }
         if self.laser.fov_deg > 360.0 {

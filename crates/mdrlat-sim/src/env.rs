@@ -6,7 +6,7 @@ use crate::pedestrians::{self, PedestrianState};
 use crate::reward::{NavStep, RewardTerms, nav_reward, reward};
 use crate::robot::RobotState;
 use crate::scene::StaticScene;
-use crate::sensors::{DepthCamera, Laser};
+use crate::sensors::{DepthCamera, Laser, ScanMemory};
 use mdrlat_core::{
     Action, DEPTH_LEN, FRAME_STACK, LASER_BEAMS, ODOM_HISTORY, Rng, Velocity, goal_in_robot_frame,
 };
@@ -224,6 +224,14 @@ pub struct EnvState {
     /// The navigation task's goal (absent in obstacle avoidance and in older states).
     #[serde(default)]
     pub goal: Option<Vec2>,
+    /// The remembered hidden obstacles, oldest frame first, odometry frame
+    /// (`sim.laser.depth_memory_frames`; empty when off, and in older states).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub memory: Vec<Vec<Vec2>>,
+    /// The smallest range of the laser's own last scan (absent in older states, whose
+    /// scans are the laser's own, and when the memory is off).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub d_min: Option<f32>,
 }
 
 /// One simulated robot in one world.
@@ -236,6 +244,11 @@ pub struct Env {
     dynamic: Vec<Prism>,
     laser: Laser,
     depth: DepthCamera,
+    /// The camera's hidden obstacles drawn into the scan (`sim.laser.depth_memory_frames`).
+    memory: Option<ScanMemory>,
+    /// The smallest range of the laser's own last scan (the collision rule and the reward
+    /// read it, never the remembered points).
+    d_min: f32,
     obs: Observation,
     /// Spawn poses and pedestrian starts.
     rng: Rng,
@@ -261,9 +274,14 @@ impl Env {
         if config.task == Task::Nav {
             check_nav(&scene, &config)?;
         }
+        let laser = Laser::new(&config.laser);
+        let depth = DepthCamera::new(&config.depth);
+        let memory = ScanMemory::new(&config, laser.angles(), depth.geometry());
         Ok(Self {
-            laser: Laser::new(&config.laser),
-            depth: DepthCamera::new(&config.depth),
+            laser,
+            depth,
+            memory,
+            d_min: f32::INFINITY,
             scene,
             config,
             robot: RobotState::default(),
@@ -376,6 +394,9 @@ impl Env {
         self.steps = 0;
         self.w_prev = 0.0;
         self.obs.odom = [Velocity::default(); ODOM_HISTORY];
+        if let Some(memory) = &mut self.memory {
+            memory.clear();
+        }
         self.sense();
         self.obs.laser.fill_with_latest();
         self.obs.depth.fill_with_latest();
@@ -515,6 +536,10 @@ impl Env {
             &mut self.noise_rng,
             self.obs.depth.push_slot(),
         );
+        self.d_min = self.obs.laser.latest().iter().copied().fold(f32::INFINITY, f32::min);
+        if let Some(memory) = &mut self.memory {
+            memory.update(pose, self.obs.depth.latest(), self.obs.laser.latest_mut());
+        }
         self.obs.goal = self.goal.map(|g| goal_in_robot_frame(pose.x, pose.y, pose.yaw, g.x, g.y));
         self.obs.pose = Some([pose.x, pose.y, pose.yaw]);
     }
@@ -571,7 +596,7 @@ impl Env {
             }
         }
         self.sense();
-        let d_min = self.obs.laser.latest().iter().copied().fold(f32::INFINITY, f32::min);
+        let d_min = self.d_min;
         if collision.is_none() && d_min < self.config.reward.collision_range_m {
             collision = Some(Collision::LaserRange);
         }
@@ -647,6 +672,12 @@ impl Env {
             w_prev: self.w_prev,
             running: self.running,
             goal: self.goal,
+            memory: self
+                .memory
+                .as_ref()
+                .map(|m| m.frames().map(<[Vec2]>::to_vec).collect())
+                .unwrap_or_default(),
+            d_min: self.memory.is_some().then_some(self.d_min),
         }
     }
 
@@ -698,6 +729,12 @@ impl Env {
         self.w_prev = state.w_prev;
         self.running = state.running;
         self.goal = state.goal;
+        self.d_min = state.d_min.unwrap_or_else(|| {
+            self.obs.laser.latest().iter().copied().fold(f32::INFINITY, f32::min)
+        });
+        if let Some(memory) = &mut self.memory {
+            memory.restore(&state.memory);
+        }
         let pose = self.robot.pose;
         self.obs.goal = self.goal.map(|g| goal_in_robot_frame(pose.x, pose.y, pose.yaw, g.x, g.y));
         self.obs.pose = Some([pose.x, pose.y, pose.yaw]);

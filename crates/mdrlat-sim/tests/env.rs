@@ -12,6 +12,12 @@ use mdrlat_world::World;
 use std::sync::Arc;
 
 fn room(extra: &str) -> World {
+    room_with_box_at([0.0, 0.2], extra)
+}
+
+/// The room with its box at (6, 6) spanning heights `z` (the laser's plane is at 0.4 m).
+fn room_with_box_at(z: [f32; 2], extra: &str) -> World {
+    let [z0, z1] = z;
     let text = format!(
         r#"version = 1
 name = "room"
@@ -21,7 +27,7 @@ obstacle = [
   {{ shape = "box", center = [4.0, 7.95], size = [8.0, 0.1], z = [0.0, 2.5] }},
   {{ shape = "box", center = [0.05, 4.0], size = [0.1, 8.0], z = [0.0, 2.5] }},
   {{ shape = "box", center = [7.95, 4.0], size = [0.1, 8.0], z = [0.0, 2.5] }},
-  {{ shape = "box", center = [6.0, 6.0], size = [0.6, 0.6], z = [0.0, 0.2] }},
+  {{ shape = "box", center = [6.0, 6.0], size = [0.6, 0.6], z = [{z0:?}, {z1:?}] }},
 ]
 spawn = [ {{ min = [1.0, 1.0], max = [7.0, 7.0] }} ]
 {extra}
@@ -530,4 +536,115 @@ fn issue_38_no_start_next_to_an_obstacle_the_sensors_cannot_see() {
     assert_eq!(near_hidden(SimConfig::default()), 0);
     let before = SimConfig { spawn_hidden_clearance_m: 0.0, ..SimConfig::default() };
     assert!(near_hidden(before) > 0, "the control found no start next to a low box");
+}
+
+/// Turns the robot in place (action 9, left) from (4.5, 6) facing the low box at (6, 6)
+/// until it faces 50° or more to the box's left: the box has left the camera's 58° and
+/// lies under the laser's plane. Returns the last step's observation and `d_min`.
+fn turn_away_from_the_low_box(world: &World, memory_frames: u32) -> (Observation, f32) {
+    let mut config = SimConfig::default();
+    config.laser.depth_memory_frames = memory_frames;
+    let mut env = Env::from_world(world.clone(), config).expect("env");
+    env.reset_with(Some(1), Some(Pose2::new(4.5, 6.0, 0.0))).expect("reset");
+    let mut d_min = f32::INFINITY;
+    while env.pose().yaw < 50f32.to_radians() {
+        let s = env.step(act(9)).expect("step");
+        assert!(!s.terminated, "turning in place hits nothing");
+        d_min = s.info.d_min;
+    }
+    (env.observation().clone(), d_min)
+}
+
+/// The beams of `scan` pointing between `from` and `to` degrees.
+fn beams_between(scan: &[f32], from: f32, to: f32) -> Vec<f32> {
+    scan.iter()
+        .enumerate()
+        .filter(|(i, _)| {
+            let a = mdrlat_core::laser_beam_angle(*i).to_degrees();
+            a >= from && a <= to
+        })
+        .map(|(_, &r)| r)
+        .collect()
+}
+
+#[test]
+fn the_scan_memory_keeps_a_low_box_the_camera_has_lost() {
+    // The room's 0.2 m box, and a seat at 0.42-0.47 m (just over the laser's plane, under
+    // the body's top), each in turn.
+    for z in [[0.0, 0.2], [0.42, 0.47]] {
+        the_scan_memory_keeps(&room_with_box_at(z, ""));
+    }
+}
+
+fn the_scan_memory_keeps(world: &World) {
+    // Facing it, the camera sees the box 1.2 m ahead; the laser passes by it.
+    let mut config = SimConfig::default();
+    config.laser.depth_memory_frames = 8;
+    let mut env = Env::from_world(world.clone(), config).expect("env");
+    let obs = env.reset_with(Some(1), Some(Pose2::new(4.5, 6.0, 0.0))).expect("reset").clone();
+    let ahead = beams_between(obs.laser.latest(), -2.0, 2.0);
+    assert!(ahead.iter().all(|&r| (1.15..1.3).contains(&r)), "the box drawn in: {ahead:?}");
+    let plain = Env::from_world(world.clone(), SimConfig::default())
+        .expect("env")
+        .reset_with(Some(1), Some(Pose2::new(4.5, 6.0, 0.0)))
+        .expect("reset")
+        .clone();
+    let ahead = beams_between(plain.laser.latest(), -2.0, 2.0);
+    assert!(ahead.iter().all(|&r| r > 3.0), "the laser alone reads the wall: {ahead:?}");
+    // Turned away, the box is behind the camera's edge: remembered in the scan (it now
+    // lies 50–64° to the right), and still never in the collision rule's d_min.
+    let (obs, d_min) = turn_away_from_the_low_box(world, 8);
+    let right = beams_between(obs.laser.latest(), -60.0, -52.0);
+    assert!(right.iter().all(|&r| (1.15..1.9).contains(&r)), "remembered: {right:?}");
+    assert!(d_min > 1.0, "the collision rule reads the laser alone: {d_min}");
+    let (plain, _) = turn_away_from_the_low_box(world, 0);
+    assert!(beams_between(plain.laser.latest(), -60.0, -52.0).iter().all(|&r| r > 2.0));
+    // A memory too short for the turn has forgotten it.
+    let (short, _) = turn_away_from_the_low_box(world, 1);
+    assert!(beams_between(short.laser.latest(), -60.0, -52.0).iter().all(|&r| r > 2.0));
+}
+
+#[test]
+fn the_scan_memory_leaves_what_the_laser_sees_alone() {
+    // Walls reach the laser's plane: with the box far off, the remembered scan is the
+    // laser's own, frame for frame, along a random episode; and with the box in view the
+    // scan differs only on the box's beams.
+    let walls = |memory_frames: u32| {
+        let mut config = SimConfig::default();
+        config.laser.depth_memory_frames = memory_frames;
+        let mut env = Env::from_world(room(""), config).expect("env");
+        env.reset_with(Some(3), Some(Pose2::new(2.0, 2.0, 3.5))).expect("reset");
+        let mut frames = vec![env.observation().laser.latest().to_vec()];
+        for i in 0..20 {
+            let s = env.step(act([9, 8, 4, 9][i % 4])).expect("step");
+            frames.push(s.observation.laser.latest().to_vec());
+        }
+        frames
+    };
+    assert_eq!(walls(16), walls(0));
+}
+
+#[test]
+fn the_scan_memory_survives_a_saved_state() {
+    let mut config = SimConfig::default();
+    config.laser.depth_memory_frames = 8;
+    let mut env = Env::from_world(room(""), config.clone()).expect("env");
+    env.reset_with(Some(1), Some(Pose2::new(4.5, 6.0, 0.0))).expect("reset");
+    for _ in 0..2 {
+        env.step(act(9)).expect("step");
+    }
+    let state = env.state();
+    assert!(!state.memory.is_empty() && state.d_min.is_some());
+    let mut copy = Env::from_world(room(""), config).expect("env");
+    copy.restore(&state).expect("restore");
+    for _ in 0..4 {
+        let (a, b) = (env.step(act(9)).expect("step"), copy.step(act(9)).expect("step"));
+        assert_eq!(a.observation.laser.latest(), b.observation.laser.latest());
+        assert_eq!(a.info.d_min, b.info.d_min);
+    }
+    // Without the memory, a state carries neither (older checkpoints stay as they were).
+    let mut plain = Env::from_world(room(""), SimConfig::default()).expect("env");
+    plain.reset_with(Some(1), None).expect("reset");
+    let json = serde_json::to_string(&plain.state()).expect("json");
+    assert!(!json.contains("memory") && !json.contains("d_min"), "{json}");
 }

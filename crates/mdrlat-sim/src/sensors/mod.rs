@@ -7,6 +7,8 @@
 
 mod depth;
 mod laser;
+mod memory;
 
 pub use depth::{DepthCamera, DepthGeometry};
 pub use laser::Laser;
+pub use memory::{LASER_SEEN_SLACK_M, MAX_MEMORY_FRAMES, ScanMemory};
