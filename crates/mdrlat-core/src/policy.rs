@@ -105,6 +105,14 @@ pub trait Policy: Send {
     /// The sensors it reads.
     fn sensors(&self) -> Sensors;
 
+    /// Frames of the depth camera's hidden obstacles drawn into the laser scan it reads
+    /// (the simulator's `sim.laser.depth_memory_frames`; 0, the default: the laser's own
+    /// scan). Whatever feeds it observations (the simulator, the ROS nodes) must draw the
+    /// same scan.
+    fn depth_memory_frames(&self) -> u32 {
+        0
+    }
+
     /// Slot `slot` starts an episode. With `Some(seed)` a stateful policy restarts its
     /// randomness from that episode seed; with `None` it continues it.
     fn begin_episode(&mut self, slot: usize, seed: Option<u64>) {

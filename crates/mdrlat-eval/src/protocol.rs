@@ -221,6 +221,9 @@ impl Policy for Timed<'_> {
     fn sensors(&self) -> Sensors {
         self.inner.sensors()
     }
+    fn depth_memory_frames(&self) -> u32 {
+        self.inner.depth_memory_frames()
+    }
     fn begin_episode(&mut self, slot: usize, seed: Option<u64>) {
         self.inner.begin_episode(slot, seed);
     }

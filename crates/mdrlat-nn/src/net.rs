@@ -32,6 +32,12 @@ pub struct QNetConfig {
     /// Laser beams.
     #[config(default = 512)]
     pub beams: usize,
+    /// Frames of the depth camera's hidden obstacles drawn into the laser input
+    /// (`sim.laser.depth_memory_frames`; 0: the laser's own scan). It changes no weight,
+    /// only what the laser input means: a model records it and whatever feeds the model
+    /// must draw the same scan.
+    #[config(default = 0)]
+    pub depth_memory_frames: usize,
 }
 
 /// Output size of a TensorFlow-"SAME" convolution with `stride`.

@@ -8,6 +8,9 @@
 use crate::convert::{ScanError, ScanOptions, convert_depth, resample_scan};
 use crate::msg::{Image, LaserScan, Odometry};
 use mdrlat_core::{Action, DEPTH_LEN, LASER_BEAMS, ODOM_HISTORY, Observation, Velocity};
+use mdrlat_geom::Pose2;
+use mdrlat_sim::SimConfig;
+use mdrlat_sim::sensors::{DepthCamera, Laser, ScanMemory};
 use std::fmt::Display;
 use std::time::{Duration, Instant};
 
@@ -106,6 +109,11 @@ pub struct Controller {
     depth: Slot,
     odom: Slot,
     odom_velocity: Velocity,
+    /// The robot's pose in the odometry frame, from the last odometry.
+    odom_pose: Pose2,
+    /// The camera's hidden obstacles drawn into each scan, for a policy that reads them
+    /// ([`Controller::with_depth_memory`]).
+    memory: Option<ScanMemory>,
     /// The 4-frame stacks (metres) and odometry the policy reads.
     obs: Observation,
     /// Frames pushed since the stacks were last (re)started.
@@ -135,6 +143,8 @@ impl Controller {
             depth: Slot::new(DEPTH_LEN),
             odom: Slot::new(0),
             odom_velocity: Velocity::default(),
+            odom_pose: Pose2::default(),
+            memory: None,
             obs: Observation::zeros(),
             stacked: 0,
             stops: Vec::new(),
@@ -143,6 +153,21 @@ impl Controller {
             scans_ok: false,
             fatal: None,
         }
+    }
+
+    /// For a policy that reads the scan with `frames` of the camera's memory
+    /// ([`Policy::depth_memory_frames`]; 0: the laser's own): each scan it gets has the
+    /// camera's obstacles hidden from the laser drawn in, carried by the odometry's pose,
+    /// exactly as the simulator draws them (`mdrlat_sim::sensors::ScanMemory`, with the
+    /// sensors of SPEC §2). It then reads the camera whatever its variant.
+    pub fn with_depth_memory(mut self, frames: u32) -> Self {
+        let mut sim = SimConfig::default();
+        sim.laser.depth_memory_frames = frames;
+        let laser = Laser::new(&sim.laser);
+        let camera = DepthCamera::new(&sim.depth).geometry();
+        self.memory = ScanMemory::new(&sim, laser.angles(), camera);
+        self.uses_depth |= self.memory.is_some();
+        self
     }
 
     /// The effective limits (after clamping to Table 1).
@@ -255,11 +280,16 @@ impl Controller {
         let result = match msg {
             Ok(o) => {
                 let (v, w) = (o.twist.linear.x, o.twist.angular.z);
-                if v.is_finite() && w.is_finite() {
-                    self.odom_velocity = Velocity::new(v as f32, w as f32);
-                    Ok(())
-                } else {
+                let yaw = o.orientation.yaw();
+                let (x, y) = (o.position.x, o.position.y);
+                if !(v.is_finite() && w.is_finite()) {
                     Err(format!("non-finite twist ({v}, {w})"))
+                } else if !(x.is_finite() && y.is_finite() && yaw.is_finite()) {
+                    Err(format!("non-finite pose ({x}, {y}, yaw {yaw})"))
+                } else {
+                    self.odom_velocity = Velocity::new(v as f32, w as f32);
+                    self.odom_pose = Pose2::new(x as f32, y as f32, yaw as f32);
+                    Ok(())
                 }
             }
             Err(e) => Err(format!("undecodable message: {e}")),
@@ -329,6 +359,12 @@ impl Controller {
             }
             if self.uses_depth {
                 self.obs.depth.push_slot().copy_from_slice(&self.depth.frame);
+            }
+            if let Some(memory) = &mut self.memory {
+                if self.stacked == 0 {
+                    memory.clear();
+                }
+                memory.update(self.odom_pose, self.obs.depth.latest(), self.obs.laser.latest_mut());
             }
             if self.stacked == 0 {
                 // As after a reset in the simulator: the first frame fills the stack.
@@ -607,5 +643,55 @@ mod tests {
         assert!(logs.iter().any(|l| l.contains("panicked: out of actions")), "{logs:?}");
         p.action = 1;
         assert!(c.tick(t0, &mut p).0.action.is_some());
+    }
+
+    #[test]
+    fn the_scan_with_the_cameras_memory_is_the_simulators() {
+        // The laser sees nothing within 5 m; the camera a surface 1 m ahead at every
+        // height (one frame), then nothing while odometry turns the robot 90° left.
+        let mut c = Controller::new(ControllerConfig::default(), true, false).with_depth_memory(3);
+        let mut p = Fixed { action: 9, fail: false, seen: Vec::new() };
+        let mut sim = SimConfig::default();
+        sim.laser.depth_memory_frames = 3;
+        let laser = Laser::new(&sim.laser);
+        let camera = DepthCamera::new(&sim.depth).geometry();
+        let mut same = ScanMemory::new(&sim, laser.angles(), camera).expect("a memory");
+        let t0 = Instant::now();
+        let mut latest = Vec::new();
+        for k in 0..5u64 {
+            let t = t0 + Duration::from_millis(200 * k);
+            let yaw = if k == 0 { 0.0 } else { std::f64::consts::FRAC_PI_2 };
+            let depth = if k == 0 { 1.0 } else { 0.0 };
+            c.on_scan(t, Ok(&scan(5.0)));
+            c.on_depth(t, Ok(&image(depth)));
+            let odom = Odometry {
+                position: crate::msg::Vector3 { x: 1.0, y: -2.0, z: 0.0 },
+                orientation: crate::msg::Quaternion::from_yaw(yaw),
+                ..Odometry::default()
+            };
+            c.on_odom(t, Ok(&odom));
+            assert!(c.tick(t, &mut p).0.action.is_some(), "it drives");
+            // The simulator's memory, given the same frame, pose and scan.
+            let mut expected = vec![5.0f32; LASER_BEAMS];
+            let frame = vec![depth; DEPTH_LEN];
+            same.update(Pose2::new(1.0, -2.0, yaw as f32), &frame, &mut expected);
+            let mut normalised = vec![0.0; LASER_BEAMS];
+            mdrlat_core::normalize_laser(&expected, &mut normalised);
+            let seen = &p.seen.last().expect("seen").0[3 * LASER_BEAMS..];
+            assert_eq!(seen, normalised.as_slice(), "tick {k}");
+            latest.push(expected);
+        }
+        let beams = |scan: &[f32], from: f32, to: f32| -> Vec<f32> {
+            (0..LASER_BEAMS)
+                .filter(|&i| (from..=to).contains(&mdrlat_core::laser_beam_angle(i).to_degrees()))
+                .map(|i| scan[i])
+                .collect()
+        };
+        // Seen ahead, the surface is drawn 1 m ahead; turned left, it lies to the right
+        // for the memory's 3 frames, and is forgotten after.
+        assert!(beams(&latest[0], -20.0, 20.0).iter().all(|&r| (0.99..1.2).contains(&r)));
+        assert!(beams(&latest[2], -100.0, -80.0).iter().all(|&r| (0.99..1.2).contains(&r)));
+        assert!(latest[3].iter().all(|&r| r == 5.0), "forgotten after 3 frames");
+        assert!(c.sensors().contains(&Sensor::Depth), "it needs the camera now");
     }
 }

@@ -209,8 +209,17 @@ pub fn run(
                 .into(),
         ));
     }
+    let memory = policy.depth_memory_frames();
+    if memory > 0 && !config.controller.require_odom {
+        return Err(RosError::Config(format!(
+            "this policy reads the scan with {memory} frames of the camera's memory, carried by \
+             the odometry's pose: it cannot run without odometry"
+        )));
+    }
+    let controller = Controller::new(config.controller.clone(), uses_laser, uses_depth)
+        .with_depth_memory(memory);
     let shared = Arc::new(Shared {
-        controller: Mutex::new(Controller::new(config.controller.clone(), uses_laser, uses_depth)),
+        controller: Mutex::new(controller),
         scans: Mutex::new(0),
         scan_arrived: Condvar::new(),
     });

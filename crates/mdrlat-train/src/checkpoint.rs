@@ -89,6 +89,10 @@ pub struct Meta {
     /// as before navigation existed).
     #[serde(default, skip_serializing_if = "Task::is_avoid")]
     pub task: Task,
+    /// The scan its network reads (`sim.laser.depth_memory_frames`; absent: the laser's
+    /// own, as in every checkpoint before it).
+    #[serde(default, skip_serializing_if = "is_zero_u32")]
+    pub depth_memory_frames: u32,
     /// Environment steps done.
     pub step: u64,
     /// Gradient steps done.
@@ -158,6 +162,10 @@ pub struct PendingStep {
     pub odom: [f32; 6],
     /// Its observation's goal.
     pub goal: [f32; 3],
+}
+
+fn is_zero_u32(n: &u32) -> bool {
+    *n == 0
 }
 
 fn is_zero(n: &usize) -> bool {

@@ -148,6 +148,7 @@ impl TrainEnvs {
             mdrlat_version: env!("CARGO_PKG_VERSION").to_string(),
             variant: config.variant,
             task,
+            depth_memory_frames: self.sim().laser.depth_memory_frames,
             step: 0,
             updates: 0,
             episodes: 0,

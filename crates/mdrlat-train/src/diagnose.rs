@@ -71,6 +71,9 @@ impl Policy for Recording<'_> {
     fn sensors(&self) -> Sensors {
         self.policy.sensors()
     }
+    fn depth_memory_frames(&self) -> u32 {
+        self.policy.depth_memory_frames()
+    }
     fn decide(
         &mut self,
         batch: &[&Observation],

@@ -22,6 +22,10 @@ use std::path::Path;
 
 pub use crate::config::Precision;
 
+/// The metadata key of a model trained on the scan with the camera's memory
+/// (`sim.laser.depth_memory_frames`; absent: the laser's own scan).
+pub const DEPTH_MEMORY_KEY: &str = "mdrlat_depth_memory_frames";
+
 /// Writes `net` to `path` in safetensors format (f32).
 ///
 /// # Errors
@@ -32,7 +36,8 @@ pub fn save_safetensors(net: &QNet, config: &QNetConfig, path: &Path) -> Result<
 
 /// Writes `net` to `path` in safetensors format in `precision`, with `extra` metadata
 /// (e.g. `mdrlat_step`) beside the variant and the input layout. A navigation network
-/// also records `mdrlat_task = nav` (an obstacle-avoidance model's file is as before).
+/// also records `mdrlat_task = nav`, one trained on the scan with the camera's memory
+/// [`DEPTH_MEMORY_KEY`] (an obstacle-avoidance model of the laser's scan is as before).
 ///
 /// # Errors
 /// The file cannot be written.
@@ -61,6 +66,9 @@ pub fn save_safetensors_as(
     );
     if config.goal_dim > 0 {
         store = store.metadata("mdrlat_task", "nav");
+    }
+    if config.depth_memory_frames > 0 {
+        store = store.metadata(DEPTH_MEMORY_KEY, config.depth_memory_frames.to_string());
     }
     let mut store = store.metadata(
         "mdrlat_outputs",
@@ -123,7 +131,22 @@ pub fn load_safetensors(
         None => Task::Avoid,
         Some(t) => t.parse().map_err(|e| format!("{}: mdrlat_task: {e}", path.display()))?,
     };
-    let config = crate::learner::net_config(variant, task);
+    let memory = match meta.get(DEPTH_MEMORY_KEY) {
+        None => 0,
+        Some(m) => m
+            .parse::<u32>()
+            .ok()
+            .filter(|&m| m > 0 && m <= mdrlat_sim::sensors::MAX_MEMORY_FRAMES)
+            .ok_or_else(|| {
+                format!(
+                    "{}: {DEPTH_MEMORY_KEY} = {m:?}: not 1 to {}",
+                    path.display(),
+                    mdrlat_sim::sensors::MAX_MEMORY_FRAMES
+                )
+            })?,
+    };
+    let config =
+        crate::learner::net_config(variant, task).with_depth_memory_frames(memory as usize);
     let mut net = config.init(device);
     let mut store = SafetensorsStore::from_file(path)
         .with_from_adapter(PyTorchToBurnAdapter.chain(FloatCastAdapter::to(DType::F32)));

@@ -15,6 +15,7 @@ use mdrlat_nn::burn::prelude::*;
 use mdrlat_nn::burn::store::{BurnpackStore, ModuleSnapshot};
 use mdrlat_nn::host::{HostGrad, HostInputs, HostNet};
 use mdrlat_nn::{QNet, QNetConfig, Variant};
+use mdrlat_sim::SimConfig;
 use mdrlat_sim::config::Task;
 use std::path::Path;
 use std::sync::Arc;
@@ -261,27 +262,43 @@ pub fn net_config(variant: Variant, task: Task) -> QNetConfig {
 
 /// The weights a warm-started run begins with (`train.init_from`, which must be set), on
 /// `device`, and where they came from: the model must be a `config.variant` network for
-/// `task`. Callers check it before creating a run directory; [`Learner::warm_start`]
-/// loads it.
+/// `sim.task`, reading the scan `sim` draws (`sim.laser.depth_memory_frames`). Callers
+/// check it before creating a run directory; [`Learner::warm_start`] loads it.
 ///
 /// # Errors
-/// No model there, or one of another variant or task.
+/// No model there, or one of another variant, task or scan.
 pub fn init_weights(
     config: &TrainConfig,
-    task: Task,
+    sim: &SimConfig,
     device: &Device,
 ) -> Result<(QNet, String), TrainError> {
     let err = |problem| TrainError::InitFrom { path: config.init_from.clone(), problem };
     let (net_config, net, source) =
         crate::policy::load_weights(Path::new(&config.init_from), device).map_err(err)?;
-    let model_task = Task::of_goal_dim(net_config.goal_dim);
+    let (model_task, task) = (Task::of_goal_dim(net_config.goal_dim), sim.task);
     if net_config.variant != config.variant || model_task != task {
         return Err(err(format!(
             "the model is a {} network for {model_task}; this run trains a {} network for {task}",
             net_config.variant, config.variant
         )));
     }
+    let memory = sim.laser.depth_memory_frames as usize;
+    if net_config.depth_memory_frames != memory {
+        return Err(err(format!(
+            "the model reads {}; this run draws {} (sim.laser.depth_memory_frames)",
+            scan_name(net_config.depth_memory_frames),
+            scan_name(memory)
+        )));
+    }
     Ok((net, source))
+}
+
+/// The scan a network with `depth_memory_frames` reads, in words.
+pub fn scan_name(depth_memory_frames: usize) -> String {
+    match depth_memory_frames {
+        0 => "the laser's own scan".into(),
+        n => format!("the scan with {n} frames of the camera's memory"),
+    }
 }
 
 /// Loads every tensor of `store` into `net`; a file that does not fit the variant exactly
@@ -405,6 +422,12 @@ impl Learner {
             host_kernels: true,
             depth_table: std::sync::OnceLock::new(),
         }
+    }
+
+    /// Records the scan the network reads (`sim.laser.depth_memory_frames`): its models
+    /// carry it ([`crate::export::DEPTH_MEMORY_KEY`]).
+    pub fn set_depth_memory_frames(&mut self, frames: u32) {
+        self.net_config.depth_memory_frames = frames as usize;
     }
 
     /// The variant.
@@ -1023,9 +1046,9 @@ impl Learner {
     /// optimisers and the averaged network stay fresh.
     ///
     /// # Errors
-    /// No model there, or one of another variant or task.
-    pub fn warm_start(&mut self, config: &TrainConfig) -> Result<(), TrainError> {
-        (self.online, _) = init_weights(config, self.task(), &self.train_device)?;
+    /// No model there, or one of another variant, task or scan.
+    pub fn warm_start(&mut self, config: &TrainConfig, sim: &SimConfig) -> Result<(), TrainError> {
+        (self.online, _) = init_weights(config, sim, &self.train_device)?;
         self.plain = self.online.valid();
         self.target = self.plain.clone();
         Ok(())

@@ -11,6 +11,7 @@ use mdrlat_core::{
 };
 use mdrlat_nn::burn::prelude::*;
 use mdrlat_nn::{QNet, QNetConfig, Variant};
+use mdrlat_sim::SimConfig;
 use mdrlat_sim::config::Task;
 use std::path::{Path, PathBuf};
 
@@ -159,13 +160,15 @@ pub fn load_weights(path: &Path, device: &Device) -> Result<(QNetConfig, QNet, S
         let minutes = meta
             .get("mdrlat_training_minutes")
             .map_or(String::new(), |m| format!(", {m} minutes of training"));
+        let scan = scan_note(&config);
         let step =
-            meta.get("mdrlat_step").map_or(String::new(), |s| format!(" (step {s}{minutes})"));
+            meta.get("mdrlat_step").map_or(scan.clone(), |s| format!(" (step {s}{minutes}{scan})"));
         return Ok((config, net, format!("{}{step}", shown(&model))));
     }
     let dir = checkpoint_dir(path)?;
     let meta = read_meta(&dir).map_err(|e| e.to_string())?;
-    let config = net_config(meta.variant, meta.task);
+    let config = net_config(meta.variant, meta.task)
+        .with_depth_memory_frames(meta.depth_memory_frames as usize);
     let mut net = config.init(device);
     // A run that keeps an average of its weights acts by it (train.average_horizon).
     let averaged = dir.join(crate::learner::AVERAGE_FILE);
@@ -175,7 +178,16 @@ pub fn load_weights(path: &Path, device: &Device) -> Result<(QNetConfig, QNet, S
         (dir.join("online.bpk"), "")
     };
     read_net(&mut net, &file, meta.variant)?;
-    Ok((config, net, format!("{} (step {}{which})", shown(&dir), meta.step)))
+    let scan = scan_note(&config);
+    Ok((config, net, format!("{} (step {}{which}{scan})", shown(&dir), meta.step)))
+}
+
+/// What a network's source line says about its scan: nothing for the laser's own.
+fn scan_note(config: &QNetConfig) -> String {
+    match config.depth_memory_frames {
+        0 => String::new(),
+        n => format!(", reading the scan with {n} frames of the camera's memory"),
+    }
 }
 
 impl GreedyPolicy {
@@ -307,6 +319,30 @@ impl GreedyPolicy {
         ))
     }
 
+    /// Makes `sim` draw the scan the network reads: a `sim` of the laser's own scan takes
+    /// the network's memory (`sim.laser.depth_memory_frames`); one that asks for another
+    /// is an error naming `what`. Everything that feeds a trained network observations
+    /// (evaluation, the ROS nodes, Python) calls it, so no network ever reads a scan it
+    /// was not trained on.
+    ///
+    /// # Errors
+    /// `sim` asks for a memory the network was not trained with.
+    pub fn adopt_scan(&self, sim: &mut SimConfig, what: &str) -> Result<(), String> {
+        let (model, asked) =
+            (self.config.depth_memory_frames as u32, sim.laser.depth_memory_frames);
+        if asked == 0 || asked == model {
+            sim.laser.depth_memory_frames = model;
+            return Ok(());
+        }
+        Err(format!(
+            "{what}: the {} network reads {}; the settings ask for {} \
+             (sim.laser.depth_memory_frames = {asked}): leave it 0 to take the network's",
+            self.variant(),
+            crate::learner::scan_name(model as usize),
+            crate::learner::scan_name(asked as usize),
+        ))
+    }
+
     /// Where the weights came from, for logs.
     pub fn source(&self) -> &str {
         &self.source
@@ -338,8 +374,13 @@ impl Policy for GreedyPolicy {
     }
 
     fn sensors(&self) -> Sensors {
+        // The scan with the camera's memory is drawn from the camera's images.
         let v = self.config.variant;
-        Sensors { laser: v.uses_laser(), depth: v.uses_depth() }
+        Sensors { laser: v.uses_laser(), depth: v.uses_depth() || self.depth_memory_frames() > 0 }
+    }
+
+    fn depth_memory_frames(&self) -> u32 {
+        self.config.depth_memory_frames as u32
     }
 
     fn decide(

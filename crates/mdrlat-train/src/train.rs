@@ -85,15 +85,17 @@ pub fn train(
     // Algorithm 1, line 1: replay buffer D, online network θ, target θ⁻ = θ — or all of it,
     // with the environments and every random stream, from the checkpoint.
     let (mut learner, mut replay, mut run, mut sink) = if resume {
-        let (run, learner, replay) = checkpoint::load(dir.path(), config, task, device)?;
+        let (run, mut learner, replay) = checkpoint::load(dir.path(), config, task, device)?;
+        learner.set_depth_memory_frames(sim.laser.depth_memory_frames);
         envs.restore(&run, &dir.checkpoint().join("meta.json"))?;
         let sink = MetricsSink::resume(dir, run.step, config.total_steps)?;
         (learner, replay, run, sink)
     } else {
         // A warm start's model is read first: a bad one stops the run before it writes.
         let mut learner = Learner::new(config, task, device);
+        learner.set_depth_memory_frames(sim.laser.depth_memory_frames);
         if !config.init_from.is_empty() {
-            learner.warm_start(config)?;
+            learner.warm_start(config, sim)?;
         }
         let mut replay = empty_replay(config, task);
         envs.start(config.seed, &mut replay)?;

@@ -599,3 +599,58 @@ fn snapshots_at_fixed_minutes_leave_the_run_unchanged_and_the_clock_resumes() {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+#[test]
+fn a_model_trained_on_the_scan_with_the_cameras_memory_says_so_everywhere() {
+    use mdrlat_core::Policy;
+    let dev = Device::flex();
+    let memory = SimConfig {
+        laser: mdrlat_sim::config::LaserConfig { depth_memory_frames: 6, ..Default::default() },
+        ..sim()
+    };
+    let run = dir("memory");
+    let cfg = TrainConfig { snapshot_minutes: 0.001, ..config(Variant::LaserOnly, 200) };
+    let (_, learner) = train(vec![world()], &memory, &cfg, &dev, &run, false, |_| {}).expect("run");
+    mdrlat_train::RunDir::at(&run).finish(&learner, 200, &cfg).expect("model");
+    // The checkpoint, the model and a snapshot record it; each loads as a policy of it.
+    assert!(read(&run, "checkpoint/meta.json").contains("\"depth_memory_frames\":6"));
+    let meta = mdrlat_train::export::safetensors_metadata(&run.join("model.safetensors"))
+        .expect("metadata");
+    assert_eq!(meta[mdrlat_train::export::DEPTH_MEMORY_KEY], "6");
+    let snapshot = std::fs::read_dir(run.join("snapshots")).expect("snapshots").next();
+    let snapshot = snapshot.expect("one snapshot").expect("entry").path();
+    for path in [run.clone(), run.join("checkpoint"), run.join("model.safetensors"), snapshot] {
+        let p = mdrlat_train::GreedyPolicy::load(&path, &dev, 1).expect("policy");
+        assert_eq!(p.depth_memory_frames(), 6, "{}", path.display());
+        assert!(p.sensors().depth, "it reads the camera, through the scan");
+        assert!(p.source().contains("6 frames of the camera's memory"), "{}", p.source());
+        // It makes a simulator of the laser's own scan draw its scan, and refuses another.
+        let mut s = SimConfig::default();
+        p.adopt_scan(&mut s, "--checkpoint x").expect("adopted");
+        assert_eq!(s.laser.depth_memory_frames, 6);
+        s.laser.depth_memory_frames = 3;
+        let e = p.adopt_scan(&mut s, "--checkpoint x").expect_err("another memory");
+        assert!(e.contains("--checkpoint x") && e.contains("depth_memory_frames = 3"), "{e}");
+    }
+    // A model of the laser's own scan refuses a simulator that draws the memory, and a warm
+    // start across the two scans is an error naming both.
+    let plain = dir("memory-plain");
+    let (_, a) = laser_only(world(), &sim(), 100, &plain, false).expect("run");
+    mdrlat_train::RunDir::at(&plain)
+        .finish(&a, 100, &config(Variant::LaserOnly, 100))
+        .expect("model");
+    let p = mdrlat_train::GreedyPolicy::load(&plain, &dev, 1).expect("policy");
+    assert_eq!((p.depth_memory_frames(), p.sensors().depth), (0, false));
+    let mut s = memory.clone();
+    assert!(p.adopt_scan(&mut s, "x").is_err());
+    let warm =
+        TrainConfig { init_from: plain.display().to_string(), ..config(Variant::LaserOnly, 40) };
+    let e = train(vec![world()], &memory, &warm, &dev, &dir("memory-warm"), false, |_| {})
+        .expect_err("another scan")
+        .to_string();
+    assert!(e.contains("train.init_from") && e.contains("the laser's own scan"), "{e}");
+    assert!(e.contains("6 frames of the camera's memory"), "{e}");
+    for d in [run, plain] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}

@@ -13,7 +13,7 @@ use crate::progress;
 use anyhow::{Context, Result};
 use mdrlat_eval::{Agent, EvalObserver, EvalSettings, Output};
 use mdrlat_nn::Variant;
-use mdrlat_sim::{EpisodeSpec, Scripted};
+use mdrlat_sim::{EpisodeSpec, Scripted, SimConfig};
 use mdrlat_sweep::local::{Event, LocalOptions};
 use mdrlat_sweep::tables::{Metric, Table2};
 use mdrlat_sweep::{EvalSpec, Plan, Sweep};
@@ -79,14 +79,15 @@ fn model_dir(a: &Args) -> Option<PathBuf> {
     }
 }
 
-/// The shipped model's greedy policy on all cores.
-fn load_model(dir: &std::path::Path) -> Result<GreedyPolicy> {
+/// The shipped model's greedy policy on all cores, with `sim` drawing the scan it reads.
+fn load_model(dir: &std::path::Path, sim: &mut SimConfig) -> Result<GreedyPolicy> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let p = GreedyPolicy::load(dir, &DeviceKind::Cpu.device(), cores)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("--model {}", dir.display()))?;
-    p.check_task(mdrlat_sim::config::Task::Avoid, &format!("--model {}", dir.display()))
-        .map_err(anyhow::Error::msg)?;
+    let what = format!("--model {}", dir.display());
+    p.check_task(mdrlat_sim::config::Task::Avoid, &what).map_err(anyhow::Error::msg)?;
+    p.adopt_scan(sim, &what).map_err(anyhow::Error::msg)?;
     Ok(p.with_forward_batch(Some(super::bench_train::EVAL_FORWARD_BATCH)))
 }
 
@@ -116,9 +117,10 @@ fn compare(a: &Args, model: &std::path::Path, config: &Config) -> Result<()> {
     let total = (names.len() * worlds.len()) as u64 * u64::from(a.episodes);
     let pb = progress::bar(total, "compare");
     for (k, name) in names.iter().enumerate() {
+        let mut sim = config.sim.clone();
         let mut policy: Box<dyn mdrlat_core::Policy> = match *name {
-            "model" => Box::new(load_model(model)?),
-            other => parse_scripted(other).map_err(anyhow::Error::msg)?.build(&config.sim, 0),
+            "model" => Box::new(load_model(model, &mut sim)?),
+            other => parse_scripted(other).map_err(anyhow::Error::msg)?.build(&sim, 0),
         };
         let label = policy.name();
         let dir = a.out.join("compare").join(name);
@@ -126,7 +128,7 @@ fn compare(a: &Args, model: &std::path::Path, config: &Config) -> Result<()> {
         let mut shown = Bar { pb: &pb, done: (k * worlds.len()) as u64 * u64::from(a.episodes) };
         let report = mdrlat_eval::evaluate(
             &worlds,
-            &config.sim,
+            &sim,
             &settings,
             Agent::One(policy.as_mut()),
             None,
@@ -266,16 +268,17 @@ pub fn run(a: &Args) -> Result<()> {
     let world = load_world(&a.world)?;
     let world_name = world.name.clone();
     let scale = px_per_m(&world, 480.0);
-    let mut venv = single_env(world, &config.sim)?;
     let model = model_dir(a);
+    let mut sim = config.sim.clone();
     let mut policy: Box<dyn mdrlat_core::Policy> = match (&a.policy, &model) {
-        (Some(s), _) => s.build(&config.sim, a.seed),
-        (None, Some(m)) => Box::new(load_model(m)?),
+        (Some(s), _) => s.build(&sim, a.seed),
+        (None, Some(m)) => Box::new(load_model(m, &mut sim)?),
         (None, None) => {
             out!("(no trained model found at {SHIPPED_MODEL}: the scripted wanderer drives)");
-            Scripted::Wander.build(&config.sim, a.seed)
+            Scripted::Wander.build(&sim, a.seed)
         }
     };
+    let mut venv = single_env(world, &sim)?;
     let gif_path = a.out.join("episode.gif");
     let csv_path = a.out.join("trajectory.csv");
     let mut rec = Recorder::create(&csv_path, Some(&gif_path), scale)?;

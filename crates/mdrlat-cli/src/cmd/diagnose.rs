@@ -51,8 +51,9 @@ pub fn run(a: &Args) -> Result<()> {
     let policy = GreedyPolicy::load(&a.checkpoint, &device, 1)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("--checkpoint {}", a.checkpoint.display()))?;
-    let sim = SimConfig { task: policy.task(), ..SimConfig::default() };
+    let mut sim = SimConfig { task: policy.task(), ..SimConfig::default() };
     policy.check_task(sim.task, "--checkpoint").map_err(anyhow::Error::msg)?;
+    policy.adopt_scan(&mut sim, "--checkpoint").map_err(anyhow::Error::msg)?;
     let mut rows = Vec::new();
     for name in &a.world {
         let world = load_world(name)?;

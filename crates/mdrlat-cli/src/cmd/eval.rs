@@ -10,8 +10,8 @@ use mdrlat_core::Policy;
 use mdrlat_eval::{Agent, EvalError, EvalObserver, EvalSettings, Output, Progress, WorldResult};
 use mdrlat_eval::{SnapshotResult, snapshots_chart, snapshots_csv, snapshots_markdown};
 use mdrlat_plan::MapSource;
-use mdrlat_sim::MovingRule;
 use mdrlat_sim::config::Task;
+use mdrlat_sim::{MovingRule, SimConfig};
 use mdrlat_train::GreedyPolicy;
 use mdrlat_train::RunDir;
 use mdrlat_train::run_dir::{snapshot_minute, snapshot_name};
@@ -213,14 +213,15 @@ fn prepare(a: &Args, cores: usize) -> Result<(EvalSettings, Config, Vec<mdrlat_w
 }
 
 /// The trained network at `path` (a run, checkpoint, model file or folder) as `a` asks for
-/// it, checked against the task, and its FLOPs per decision.
+/// it, checked against the task, its FLOPs per decision, and `sim` drawing the scan it
+/// reads ([`GreedyPolicy::adopt_scan`]).
 fn network(
     a: &Args,
     path: &Path,
     flag: &str,
     cores: usize,
-    task: Task,
-) -> Result<(GreedyPolicy, f64)> {
+    sim: &SimConfig,
+) -> Result<(GreedyPolicy, f64, SimConfig)> {
     let device = a.device.device();
     let p = GreedyPolicy::load(path, &device, a.threads.unwrap_or(cores))
         .map_err(anyhow::Error::msg)
@@ -231,9 +232,12 @@ fn network(
     } else {
         p
     };
-    p.check_task(task, &format!("{flag} {}", path.display())).map_err(anyhow::Error::msg)?;
+    let what = format!("{flag} {}", path.display());
+    p.check_task(sim.task, &what).map_err(anyhow::Error::msg)?;
+    let mut sim = sim.clone();
+    p.adopt_scan(&mut sim, &what).map_err(anyhow::Error::msg)?;
     let flops = p.config().decision_flops() as f64;
-    Ok((p, flops))
+    Ok((p, flops, sim))
 }
 
 /// Continues `run`: the evaluation of one policy (or the planner, per world).
@@ -245,14 +249,16 @@ fn run_one(
     worlds: &[mdrlat_world::World],
 ) -> Result<()> {
     // The planner's map is its world's: it is made per world below.
-    let (mut policy, flop_per_decision): (Option<Box<dyn Policy>>, Option<f64>) =
+    let (mut policy, flop_per_decision, sim): (Option<Box<dyn Policy>>, Option<f64>, SimConfig) =
         match (&a.checkpoint, a.policy) {
             (Some(run), None) => {
-                let (p, flops) = network(a, run, "--checkpoint", cores, config.sim.task)?;
-                (Some(Box::new(p)), Some(flops))
+                let (p, flops, sim) = network(a, run, "--checkpoint", cores, &config.sim)?;
+                (Some(Box::new(p)), Some(flops), sim)
             }
-            (None, Some(PolicyArg::Scripted(s))) => (Some(s.build(&config.sim, a.seed)), None),
-            (None, Some(PolicyArg::Planner(_))) => (None, None),
+            (None, Some(PolicyArg::Scripted(s))) => {
+                (Some(s.build(&config.sim, a.seed)), None, config.sim.clone())
+            }
+            (None, Some(PolicyArg::Planner(_))) => (None, None, config.sim.clone()),
             _ => bail!(
                 "give exactly one of --checkpoint RUN_DIR, --snapshots RUN_DIR and --policy NAME"
             ),
@@ -262,7 +268,7 @@ fn run_one(
             Some(PolicyArg::Planner(m)) => m,
             _ => MapSource::LaserPlane,
         };
-        super::planner(world, &config.sim, map)
+        super::planner(world, &sim, map)
             .map_err(|e| EvalError::Settings(format!("planner for '{}': {e:#}", world.name)))
     };
     let total = (settings.episodes_per_world() * worlds.len()) as u64;
@@ -272,16 +278,9 @@ fn run_one(
         None => Agent::PerWorld(&mut planner),
     };
     let out = Output { dir: &a.out, overwrite: a.overwrite, figures: a.figures };
-    let report = mdrlat_eval::evaluate(
-        worlds,
-        &config.sim,
-        settings,
-        agent,
-        flop_per_decision,
-        &out,
-        &mut shown,
-    )
-    .map_err(flag_hint)?;
+    let report =
+        mdrlat_eval::evaluate(worlds, &sim, settings, agent, flop_per_decision, &out, &mut shown)
+            .map_err(flag_hint)?;
     shown.pb.finish_and_clear();
     if !a.json {
         let (names, written) = (report.policies.join(", "), report.written.join(", "));
@@ -362,7 +361,7 @@ fn run_snapshots(
     let mut cpus: Vec<String> = Vec::new();
     let per_snapshot = (settings.episodes_per_world() * worlds.len()) as u64;
     for (k, (minute, path)) in snapshots.iter().enumerate() {
-        let (mut p, flops) = network(a, path, "--snapshots", cores, config.sim.task)?;
+        let (mut p, flops, sim) = network(a, path, "--snapshots", cores, &config.sim)?;
         let meta = mdrlat_train::export::safetensors_metadata(&path.join("model.safetensors"))
             .map_err(anyhow::Error::msg)?;
         let name = snapshot_name(*minute);
@@ -375,7 +374,7 @@ fn run_snapshots(
         }
         let report = mdrlat_eval::evaluate(
             worlds,
-            &config.sim,
+            &sim,
             settings,
             Agent::One(&mut p),
             Some(flops),

@@ -188,7 +188,7 @@ pub fn run(a: &Args) -> Result<()> {
             if !config.train.init_from.is_empty() {
                 let (_, source) = mdrlat_train::init_weights(
                     &config.train,
-                    config.sim.task,
+                    &config.sim,
                     &mdrlat_nn::burn::prelude::Device::flex(),
                 )?;
                 out!("warm start from {source}");
