@@ -73,6 +73,8 @@ class QNet(nn.Module):
         if variant not in VARIANTS:
             raise ValueError(f"variant {variant!r}: expected one of {', '.join(VARIANTS)}")
         self.variant, self.goal_dim = variant, goal_dim
+        # Frames of the camera's memory in the laser scan it reads (set by `load`).
+        self.depth_memory_frames = 0
         laser, depth, fusion, aux = VARIANTS[variant]
         h = goal_dim
         if depth:
