@@ -173,10 +173,11 @@ class QNet(nn.Module):
         net = cls(variant, goal_dim=3 if meta.get("mdrlat_task") == "nav" else 0)
         # The scan it was trained on: feed it from an env made with
         # laser={"depth_memory_frames": net.depth_memory_frames} (0: the laser's own).
-        memory = meta.get("mdrlat_depth_memory_frames", "0")
-        if not memory.isdigit() or not 0 <= int(memory) <= 64:
-            raise ValueError(f"{path}: mdrlat_depth_memory_frames = {memory!r}: not 0 to 64")
-        net.depth_memory_frames = int(memory)
+        memory = meta.get("mdrlat_depth_memory_frames")
+        if memory is not None:
+            if not memory.isdigit() or not 1 <= int(memory) <= 64:
+                raise ValueError(f"{path}: mdrlat_depth_memory_frames = {memory!r}: not 1 to 64")
+            net.depth_memory_frames = int(memory)
         state = {}
         for name, value in tensors.items():
             module, _, param = name.rpartition(".")

@@ -284,7 +284,10 @@ impl Controller {
                 let (x, y) = (o.position.x, o.position.y);
                 if !(v.is_finite() && w.is_finite()) {
                     Err(format!("non-finite twist ({v}, {w})"))
-                } else if !(x.is_finite() && y.is_finite() && yaw.is_finite()) {
+                } else if self.memory.is_some()
+                    && !(x.is_finite() && y.is_finite() && yaw.is_finite())
+                {
+                    // Only the scan with the camera's memory reads the pose.
                     Err(format!("non-finite pose ({x}, {y}, yaw {yaw})"))
                 } else {
                     self.odom_velocity = Velocity::new(v as f32, w as f32);

@@ -167,6 +167,14 @@ pub fn load_weights(path: &Path, device: &Device) -> Result<(QNetConfig, QNet, S
     }
     let dir = checkpoint_dir(path)?;
     let meta = read_meta(&dir).map_err(|e| e.to_string())?;
+    if meta.depth_memory_frames > mdrlat_sim::sensors::MAX_MEMORY_FRAMES {
+        return Err(format!(
+            "{}: depth_memory_frames = {}: not 0 to {}",
+            dir.join("meta.json").display(),
+            meta.depth_memory_frames,
+            mdrlat_sim::sensors::MAX_MEMORY_FRAMES
+        ));
+    }
     let config = net_config(meta.variant, meta.task)
         .with_depth_memory_frames(meta.depth_memory_frames as usize);
     let mut net = config.init(device);

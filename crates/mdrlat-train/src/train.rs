@@ -86,6 +86,17 @@ pub fn train(
     // with the environments and every random stream, from the checkpoint.
     let (mut learner, mut replay, mut run, mut sink) = if resume {
         let (run, mut learner, replay) = checkpoint::load(dir.path(), config, task, device)?;
+        if run.depth_memory_frames != sim.laser.depth_memory_frames {
+            return Err(TrainError::Checkpoint {
+                path: dir.checkpoint().join("meta.json"),
+                problem: format!(
+                    "its network reads {}; the run's settings draw {} \
+                     (sim.laser.depth_memory_frames)",
+                    crate::learner::scan_name(run.depth_memory_frames as usize),
+                    crate::learner::scan_name(sim.laser.depth_memory_frames as usize)
+                ),
+            });
+        }
         learner.set_depth_memory_frames(sim.laser.depth_memory_frames);
         envs.restore(&run, &dir.checkpoint().join("meta.json"))?;
         let sink = MetricsSink::resume(dir, run.step, config.total_steps)?;

@@ -650,6 +650,20 @@ fn a_model_trained_on_the_scan_with_the_cameras_memory_says_so_everywhere() {
         .to_string();
     assert!(e.contains("train.init_from") && e.contains("the laser's own scan"), "{e}");
     assert!(e.contains("6 frames of the camera's memory"), "{e}");
+    // Resumed under settings that draw another scan: an error naming the checkpoint.
+    let more = TrainConfig { total_steps: 250, ..cfg.clone() };
+    let e = train(vec![world()], &sim(), &more, &dev, &run, true, |_| {})
+        .expect_err("another scan")
+        .to_string();
+    assert!(e.contains("meta.json") && e.contains("depth_memory_frames"), "{e}");
+    // A checkpoint naming an impossible memory is refused, not allocated.
+    let meta = read(&run, "checkpoint/meta.json")
+        .replace("\"depth_memory_frames\":6", "\"depth_memory_frames\":4000000000");
+    std::fs::write(run.join("checkpoint/meta.json"), meta).expect("write");
+    let Err(e) = mdrlat_train::GreedyPolicy::load(&run.join("checkpoint"), &dev, 1) else {
+        panic!("an impossible memory is refused")
+    };
+    assert!(e.contains("depth_memory_frames = 4000000000"), "{e}");
     for d in [run, plain] {
         let _ = std::fs::remove_dir_all(d);
     }

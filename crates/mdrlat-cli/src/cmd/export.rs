@@ -54,10 +54,11 @@ fn test_worlds(task: Task) -> &'static [&'static str] {
 }
 
 /// Observations the policy meets when it drives in the test worlds of its task (a new
-/// episode after each collision, goal or 300 steps), `n` in all.
+/// episode after each collision, goal or 300 steps), `n` in all, with the scan it reads.
 fn observations(policy: &mut GreedyPolicy, n: usize, seed: u64) -> Result<Vec<Observation>> {
     let worlds = test_worlds(policy.task());
-    let sim = SimConfig { task: policy.task(), ..SimConfig::default() };
+    let mut sim = SimConfig { task: policy.task(), ..SimConfig::default() };
+    policy.adopt_scan(&mut sim, "--checkpoint").map_err(anyhow::Error::msg)?;
     let per = n.div_ceil(worlds.len());
     let mut out = Vec::with_capacity(n);
     for (w, name) in worlds.iter().enumerate() {
@@ -148,6 +149,14 @@ fn load_mean(
         return Ok(first);
     }
     for (p, path) in rest.iter().zip(&checkpoints[1..]) {
+        if p.config().depth_memory_frames != first.config().depth_memory_frames {
+            bail!(
+                "--checkpoint {}: reads {}, the first --checkpoint {}: only networks of one scan can be averaged",
+                path.display(),
+                mdrlat_train::learner::scan_name(p.config().depth_memory_frames),
+                mdrlat_train::learner::scan_name(first.config().depth_memory_frames),
+            );
+        }
         if p.variant() != first.variant() || p.task() != first.task() {
             bail!(
                 "--checkpoint {}: a {} network for {:?}, the first --checkpoint a {} network for {:?}: only networks of one variant and task can be averaged",

@@ -399,6 +399,9 @@ pub fn run_sim<T: SimRobot>(
     }
     let mut config = Config::load_or_default(a.config.as_deref())?.sim;
     config.max_episode_steps = if a.episode_steps == 0 { u32::MAX } else { a.episode_steps };
+    // The simulated robot publishes what its sensors give: the laser's own scan. A policy
+    // node that reads the camera's memory draws it itself, as on a robot.
+    config.laser.depth_memory_frames = 0;
     let world = load_world(&a.world)?;
     let mut env = make_env(world, &config)?;
     for path in [&a.log, &a.picture].into_iter().flatten() {

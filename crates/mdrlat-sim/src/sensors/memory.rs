@@ -50,9 +50,10 @@ pub struct ScanMemory {
 }
 
 impl ScanMemory {
-    /// The memory `sim` asks for: `None` when `sim.laser.depth_memory_frames` is 0.
+    /// The memory `sim` asks for: `None` when `sim.laser.depth_memory_frames` is 0 (a
+    /// validated `sim` asks for at most [`MAX_MEMORY_FRAMES`]; more are not kept).
     pub fn new(sim: &SimConfig, beam_angles: &[f32], geometry: DepthGeometry) -> Option<Self> {
-        let capacity = sim.laser.depth_memory_frames as usize;
+        let capacity = sim.laser.depth_memory_frames.min(MAX_MEMORY_FRAMES) as usize;
         if capacity == 0 || beam_angles.len() < 2 {
             return None;
         }
