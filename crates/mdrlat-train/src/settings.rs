@@ -41,7 +41,7 @@ pub enum Preset {
     #[default]
     Paper,
     /// mdrlat's own recipe (`configs/fast.toml`): several environments, a random warm-up, a
-    /// larger replay, generated training worlds.
+    /// larger replay, Polyak averaging, and the scan with the camera's memory.
     Fast,
 }
 
@@ -242,7 +242,11 @@ mod tests {
     #[test]
     fn the_fast_preset_changes_training_only_and_a_file_and_sets_go_over_it() {
         let fast = Config::resolve_preset(Preset::Fast, None, &[]).expect("fast resolves");
-        assert_eq!(fast.sim, Config::default().sim, "fast changes no simulator setting");
+        // Of the simulator, fast changes the scan the networks read, nothing else.
+        assert_eq!(fast.sim.laser.depth_memory_frames, 8);
+        let mut plain = fast.sim.clone();
+        plain.laser.depth_memory_frames = 0;
+        assert_eq!(plain, Config::default().sim, "fast changes no other simulator setting");
         assert_ne!(fast.train, Config::default().train);
         assert!(fast.train.envs > 1);
         let dir = std::env::temp_dir().join(format!("mdrlat-preset-{}", std::process::id()));
