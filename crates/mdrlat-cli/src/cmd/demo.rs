@@ -28,9 +28,9 @@ pub struct Args {
     #[arg(long, default_value = "office")]
     world: String,
     /// Seed of the episode. The default one shows the shipped model through a full
-    /// 300-step episode; it gets through 72 % of office's evaluation episodes, so other seeds
-    /// may end in a collision (2 of the seeds 1-6 do: 4 and 6).
-    #[arg(long, default_value_t = 1)]
+    /// 300-step episode; it gets through 85 % of office's evaluation episodes, so other seeds
+    /// may end in a collision (2 of the seeds 0-5 do: 1 and 3).
+    #[arg(long, default_value_t = 2)]
     seed: u64,
     /// Most steps of the episode.
     #[arg(long, default_value_t = 300)]
