@@ -10,20 +10,22 @@ pub mod npy;
 pub mod obs;
 pub mod policy;
 pub mod rng;
+pub mod scan_memory;
 pub mod variant;
 
 pub use action::{Action, TABLE_1, Velocity};
 pub use obs::{
-    DEPTH_COLS, DEPTH_HFOV_DEG, DEPTH_LEN, DEPTH_MIN_RANGE_M, DEPTH_ROWS, DEPTH_VFOV_DEG,
-    FRAME_STACK, FrameStack, GOAL_DIM, GOAL_NORM_M, LASER_BEAMS, LASER_FOV_DEG, LASER_MAX_RANGE_M,
-    ODOM_HISTORY, Observation, goal_in_robot_frame, laser_beam_angle, normalize_depth,
-    normalize_goal, normalize_laser,
+    DEPTH_COLS, DEPTH_HEIGHT_M, DEPTH_HFOV_DEG, DEPTH_LEN, DEPTH_MIN_RANGE_M, DEPTH_ROWS,
+    DEPTH_VFOV_DEG, FRAME_STACK, FrameStack, GOAL_DIM, GOAL_NORM_M, LASER_BEAMS, LASER_FOV_DEG,
+    LASER_MAX_RANGE_M, ODOM_HISTORY, Observation, goal_in_robot_frame, laser_beam_angle,
+    normalize_depth, normalize_goal, normalize_laser,
 };
 pub use policy::{
     Decision, Policy, PolicyError, Sensors, catch_panic, check_batch, decide_each, decide_one,
     greedy_actions,
 };
 pub use rng::Rng;
+pub use scan_memory::{DepthGeometry, LASER_SEEN_SLACK_M, MAX_MEMORY_FRAMES, ScanMemory};
 pub use variant::{Variant, VariantParseError};
 
 /// Robot constants shared by the simulator and the world checks (turtlebot2 / Kobuki).

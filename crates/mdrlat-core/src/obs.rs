@@ -38,6 +38,8 @@ pub const DEPTH_MIN_RANGE_M: f32 = 0.4;
 pub const DEPTH_HFOV_DEG: f32 = 58.0;
 /// The depth camera's vertical field of view (SPEC §2).
 pub const DEPTH_VFOV_DEG: f32 = 45.0;
+/// The depth camera's height above the floor, metres (SPEC §2; zero pitch).
+pub const DEPTH_HEIGHT_M: f32 = 0.30;
 
 /// Length of the goal input of the navigation task: distance, sin and cos of the bearing.
 pub const GOAL_DIM: usize = 3;

@@ -7,10 +7,8 @@
 
 use crate::convert::{ScanError, ScanOptions, convert_depth, resample_scan};
 use crate::msg::{Image, LaserScan, Odometry};
+use mdrlat_core::ScanMemory;
 use mdrlat_core::{Action, DEPTH_LEN, LASER_BEAMS, ODOM_HISTORY, Observation, Velocity};
-use mdrlat_geom::Pose2;
-use mdrlat_sim::SimConfig;
-use mdrlat_sim::sensors::{DepthCamera, Laser, ScanMemory};
 use std::fmt::Display;
 use std::time::{Duration, Instant};
 
@@ -109,8 +107,8 @@ pub struct Controller {
     depth: Slot,
     odom: Slot,
     odom_velocity: Velocity,
-    /// The robot's pose in the odometry frame, from the last odometry.
-    odom_pose: Pose2,
+    /// The robot's pose in the odometry frame, `[x, y, yaw]`, from the last odometry.
+    odom_pose: [f32; 3],
     /// The camera's hidden obstacles drawn into each scan, for a policy that reads them
     /// ([`Controller::with_depth_memory`]).
     memory: Option<ScanMemory>,
@@ -143,7 +141,7 @@ impl Controller {
             depth: Slot::new(DEPTH_LEN),
             odom: Slot::new(0),
             odom_velocity: Velocity::default(),
-            odom_pose: Pose2::default(),
+            odom_pose: [0.0; 3],
             memory: None,
             obs: Observation::zeros(),
             stacked: 0,
@@ -158,14 +156,10 @@ impl Controller {
     /// For a policy that reads the scan with `frames` of the camera's memory
     /// ([`Policy::depth_memory_frames`]; 0: the laser's own): each scan it gets has the
     /// camera's obstacles hidden from the laser drawn in, carried by the odometry's pose,
-    /// exactly as the simulator draws them (`mdrlat_sim::sensors::ScanMemory`, with the
-    /// sensors of SPEC §2). It then reads the camera whatever its variant.
+    /// with the simulator's own code ([`ScanMemory::spec`]: the sensors and body of SPEC §2,
+    /// the simulator's defaults). It then reads the camera whatever its variant.
     pub fn with_depth_memory(mut self, frames: u32) -> Self {
-        let mut sim = SimConfig::default();
-        sim.laser.depth_memory_frames = frames;
-        let laser = Laser::new(&sim.laser);
-        let camera = DepthCamera::new(&sim.depth).geometry();
-        self.memory = ScanMemory::new(&sim, laser.angles(), camera);
+        self.memory = ScanMemory::spec(frames);
         self.uses_depth |= self.memory.is_some();
         self
     }
@@ -291,7 +285,7 @@ impl Controller {
                     Err(format!("non-finite pose ({x}, {y}, yaw {yaw})"))
                 } else {
                     self.odom_velocity = Velocity::new(v as f32, w as f32);
-                    self.odom_pose = Pose2::new(x as f32, y as f32, yaw as f32);
+                    self.odom_pose = [x as f32, y as f32, yaw as f32];
                     Ok(())
                 }
             }
@@ -654,11 +648,7 @@ mod tests {
         // height (one frame), then nothing while odometry turns the robot 90° left.
         let mut c = Controller::new(ControllerConfig::default(), true, false).with_depth_memory(3);
         let mut p = Fixed { action: 9, fail: false, seen: Vec::new() };
-        let mut sim = SimConfig::default();
-        sim.laser.depth_memory_frames = 3;
-        let laser = Laser::new(&sim.laser);
-        let camera = DepthCamera::new(&sim.depth).geometry();
-        let mut same = ScanMemory::new(&sim, laser.angles(), camera).expect("a memory");
+        let mut same = ScanMemory::spec(3).expect("a memory");
         let t0 = Instant::now();
         let mut latest = Vec::new();
         for k in 0..5u64 {
@@ -677,7 +667,7 @@ mod tests {
             // The simulator's memory, given the same frame, pose and scan.
             let mut expected = vec![5.0f32; LASER_BEAMS];
             let frame = vec![depth; DEPTH_LEN];
-            same.update(Pose2::new(1.0, -2.0, yaw as f32), &frame, &mut expected);
+            same.update([1.0, -2.0, yaw as f32], &frame, &mut expected);
             let mut normalised = vec![0.0; LASER_BEAMS];
             mdrlat_core::normalize_laser(&expected, &mut normalised);
             let seen = &p.seen.last().expect("seen").0[3 * LASER_BEAMS..];

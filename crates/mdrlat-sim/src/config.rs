@@ -250,7 +250,7 @@ impl Default for DepthConfig {
         Self {
             hfov_deg: mdrlat_core::DEPTH_HFOV_DEG,
             vfov_deg: mdrlat_core::DEPTH_VFOV_DEG,
-            height_m: 0.30,
+            height_m: mdrlat_core::DEPTH_HEIGHT_M,
             min_range_m: mdrlat_core::DEPTH_MIN_RANGE_M,
             max_range_m: 10.0,
             noise_std_at_1m: 0.0,

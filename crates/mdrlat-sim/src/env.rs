@@ -276,7 +276,13 @@ impl Env {
         }
         let laser = Laser::new(&config.laser);
         let depth = DepthCamera::new(&config.depth);
-        let memory = ScanMemory::new(&config, laser.angles(), depth.geometry());
+        let memory = ScanMemory::new(
+            config.laser.depth_memory_frames,
+            laser.angles(),
+            depth.geometry(),
+            config.laser.max_range_m,
+            config.robot.body_height_m,
+        );
         Ok(Self {
             laser,
             depth,
@@ -538,7 +544,8 @@ impl Env {
         );
         self.d_min = self.obs.laser.latest().iter().copied().fold(f32::INFINITY, f32::min);
         if let Some(memory) = &mut self.memory {
-            memory.update(pose, self.obs.depth.latest(), self.obs.laser.latest_mut());
+            let odom = [pose.x, pose.y, pose.yaw];
+            memory.update(odom, self.obs.depth.latest(), self.obs.laser.latest_mut());
         }
         self.obs.goal = self.goal.map(|g| goal_in_robot_frame(pose.x, pose.y, pose.yaw, g.x, g.y));
         self.obs.pose = Some([pose.x, pose.y, pose.yaw]);
@@ -675,7 +682,10 @@ impl Env {
             memory: self
                 .memory
                 .as_ref()
-                .map(|m| m.frames().map(<[Vec2]>::to_vec).collect())
+                .map(|m| {
+                    let frame = |f: &[[f32; 2]]| f.iter().map(|&[x, y]| Vec2::new(x, y)).collect();
+                    m.frames().map(frame).collect()
+                })
                 .unwrap_or_default(),
             d_min: self.memory.is_some().then_some(self.d_min),
         }
@@ -733,7 +743,8 @@ impl Env {
             self.obs.laser.latest().iter().copied().fold(f32::INFINITY, f32::min)
         });
         if let Some(memory) = &mut self.memory {
-            memory.restore(&state.memory);
+            let frame = |f: &Vec<Vec2>| f.iter().map(|p| [p.x, p.y]).collect();
+            memory.restore(state.memory.iter().map(frame));
         }
         let pose = self.robot.pose;
         self.obs.goal = self.goal.map(|g| goal_in_robot_frame(pose.x, pose.y, pose.yaw, g.x, g.y));

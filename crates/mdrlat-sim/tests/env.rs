@@ -648,3 +648,25 @@ fn the_scan_memory_survives_a_saved_state() {
     let json = serde_json::to_string(&plain.state()).expect("json");
     assert!(!json.contains("memory") && !json.contains("d_min"), "{json}");
 }
+
+#[test]
+fn the_robots_scan_memory_is_the_simulators() {
+    // The ROS nodes draw the memory with `ScanMemory::spec` (SPEC §2's sensors from core's
+    // constants); the simulator with its own laser and camera. Same beams, same projection,
+    // so the same scan for the same frames and poses.
+    let sim = SimConfig::default();
+    let laser = mdrlat_sim::sensors::Laser::new(&sim.laser);
+    let spec: Vec<f32> = (0..mdrlat_core::LASER_BEAMS).map(mdrlat_core::laser_beam_angle).collect();
+    assert_eq!(laser.angles(), spec.as_slice());
+    let camera = mdrlat_sim::sensors::DepthCamera::new(&sim.depth).geometry();
+    let pinhole = mdrlat_core::DepthGeometry::pinhole(
+        mdrlat_core::DEPTH_HFOV_DEG,
+        mdrlat_core::DEPTH_VFOV_DEG,
+        mdrlat_core::DEPTH_HEIGHT_M,
+    );
+    assert_eq!(camera, pinhole);
+    assert_eq!(
+        (sim.laser.max_range_m, sim.robot.body_height_m),
+        (mdrlat_core::LASER_MAX_RANGE_M, mdrlat_core::robot::BODY_HEIGHT_M)
+    );
+}

@@ -2,6 +2,7 @@
 
 use crate::config::DepthConfig;
 use crate::scene::StaticScene;
+pub use mdrlat_core::DepthGeometry;
 use mdrlat_core::{DEPTH_COLS, DEPTH_ROWS, Rng};
 
 const _: () = assert!(DEPTH_COLS.is_multiple_of(16), "the blocked transpose needs whole blocks");
@@ -194,39 +195,6 @@ impl DepthCamera {
                 if sigma > 0.0 {
                     let noisy = *z + sigma * *z * *z * rng.normal();
                     *z = if noisy >= lo && noisy <= hi { noisy } else { 0.0 };
-                }
-            }
-        }
-    }
-}
-
-/// The projection of a depth camera: enough to turn a depth image back into points.
-#[derive(Debug, Clone, PartialEq)]
-pub struct DepthGeometry {
-    /// Ground-plane angle of each column's ray in the robot frame, column 0 (left) first.
-    pub column_angles: Vec<f32>,
-    /// Ground distance per metre of z-depth, per column (`sqrt(1 + x_c²)`).
-    pub column_k: Vec<f32>,
-    /// Normalised image y (down positive) of each row's centre.
-    pub row_y: Vec<f32>,
-    /// Height of the optical centre, metres.
-    pub height_m: f32,
-}
-
-impl DepthGeometry {
-    /// A virtual laser scan from a depth image (as ROS's depthimage_to_laserscan, but
-    /// height-aware): per column, the ground distance of the nearest pixel whose height lies
-    /// in `[z_lo, z_hi]` metres — obstacles the body can hit, floor excluded. Columns with no
-    /// such pixel read `f32::INFINITY`.
-    pub fn obstacle_ranges(&self, depth_m: &[f32], z_lo: f32, z_hi: f32, out: &mut [f32]) {
-        let cols = self.column_angles.len();
-        out.fill(f32::INFINITY);
-        for (r, row) in depth_m.chunks_exact(cols).enumerate() {
-            let y = self.row_y[r];
-            for (c, &z) in row.iter().enumerate() {
-                let h = self.height_m - y * z;
-                if z > 0.0 && h >= z_lo && h <= z_hi {
-                    out[c] = out[c].min(z * self.column_k[c]);
                 }
             }
         }

@@ -7,8 +7,8 @@
 
 mod depth;
 mod laser;
-mod memory;
 
 pub use depth::{DepthCamera, DepthGeometry};
 pub use laser::Laser;
-pub use memory::{LASER_SEEN_SLACK_M, MAX_MEMORY_FRAMES, ScanMemory};
+// The scan with the camera's memory is drawn by the robot's node too: it lives in core.
+pub use mdrlat_core::{LASER_SEEN_SLACK_M, MAX_MEMORY_FRAMES, ScanMemory};
