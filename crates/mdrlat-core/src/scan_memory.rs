@@ -60,9 +60,10 @@ impl DepthGeometry {
         let fx = (DEPTH_COLS as f32 / 2.0) / (hfov_deg.to_radians() / 2.0).tan();
         let fy = (DEPTH_ROWS as f32 / 2.0) / (vfov_deg.to_radians() / 2.0).tan();
         let xs = (0..DEPTH_COLS).map(|c| (c as f32 + 0.5 - DEPTH_COLS as f32 / 2.0) / fx);
-        let (column_angles, column_k) = xs.map(|x| ((-x).atan(), (1.0 + x * x).sqrt())).unzip();
-        // The simulator's camera keeps 1 / y per row for its ray casting and its geometry
-        // inverts it back: the same arithmetic here, so both give the same bits.
+        // The simulator's camera casts with 1 / k per column and 1 / y per row; these are
+        // their inverses, computed that way so the two never differ by a rounding.
+        let (column_angles, column_k) =
+            xs.map(|x| ((-x).atan(), 1.0 / (1.0 / (1.0 + x * x).sqrt()))).unzip();
         let row_y = (0..DEPTH_ROWS)
             .map(|r| 1.0 / (1.0 / ((r as f32 + 0.5 - DEPTH_ROWS as f32 / 2.0) / fy)))
             .collect();

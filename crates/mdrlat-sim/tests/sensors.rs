@@ -206,3 +206,26 @@ mod properties {
         }
     }
 }
+
+#[test]
+fn the_cameras_geometry_is_the_rays_it_casts() {
+    // `DepthCamera::geometry` is core's pinhole; it must describe this camera's own rays,
+    // for any field of view: a wall at 2 m ahead reads z = 2 / k in every column, so
+    // z · k is 2 m for all of them.
+    for (hfov, vfov) in [(58.0, 45.0), (70.0, 50.0)] {
+        let cfg = mdrlat_sim::config::DepthConfig {
+            hfov_deg: hfov,
+            vfov_deg: vfov,
+            ..Default::default()
+        };
+        let geometry = mdrlat_sim::sensors::DepthCamera::new(&cfg).geometry();
+        assert_eq!(geometry.column_angles.len(), mdrlat_core::DEPTH_COLS);
+        let half = hfov.to_radians() / 2.0;
+        let (first, last) =
+            (geometry.column_angles[0], geometry.column_angles[mdrlat_core::DEPTH_COLS - 1]);
+        assert!(first > 0.0 && first < half && last < 0.0 && last > -half, "{first} {last}");
+        for (a, k) in geometry.column_angles.iter().zip(&geometry.column_k) {
+            assert!((k - 1.0 / a.cos()).abs() < 1e-5, "{a} {k}");
+        }
+    }
+}

@@ -82,15 +82,10 @@ impl DepthCamera {
         &self.cfg
     }
 
-    /// The camera's projection, for turning images back into geometry.
+    /// The camera's projection, for turning images back into geometry: the one pinhole of
+    /// `mdrlat-core` (which the robot's node uses too), the same rays this camera casts.
     pub fn geometry(&self) -> DepthGeometry {
-        let n = DEPTH_COLS;
-        DepthGeometry {
-            column_angles: (0..n).map(|c| self.fan.angles()[n - 1 - c]).collect(),
-            column_k: (0..n).map(|c| 1.0 / self.inv_k[n - 1 - c]).collect(),
-            row_y: self.inv_y.iter().map(|iy| 1.0 / iy).collect(),
-            height_m: self.cfg.height_m,
-        }
+        DepthGeometry::pinhole(self.cfg.hfov_deg, self.cfg.vfov_deg, self.cfg.height_m)
     }
 
     /// Captures a frame from `pose` into `out` (128 x 160, row-major, metres).
