@@ -752,6 +752,13 @@ impl Env {
         Ok(())
     }
 
+    /// The smallest range of the laser's own last scan, metres: what the collision rule
+    /// and the reward read. It equals the smallest range of the observation's scan unless
+    /// the camera's memory (`sim.laser.depth_memory_frames`) drew nearer points into it.
+    pub fn laser_d_min(&self) -> f32 {
+        self.d_min
+    }
+
     /// The current observation.
     pub fn observation(&self) -> &Observation {
         &self.obs

@@ -584,6 +584,9 @@ fn the_scan_memory_keeps(world: &World) {
     let obs = env.reset_with(Some(1), Some(Pose2::new(4.5, 6.0, 0.0))).expect("reset").clone();
     let ahead = beams_between(obs.laser.latest(), -2.0, 2.0);
     assert!(ahead.iter().all(|&r| (1.15..1.3).contains(&r)), "the box drawn in: {ahead:?}");
+    // The scan's nearest point is the box; the laser's own (the collision rule's) is not.
+    let scan_min = obs.laser.latest().iter().copied().fold(f32::INFINITY, f32::min);
+    assert!(scan_min < 1.3 && env.laser_d_min() > scan_min, "{scan_min} {}", env.laser_d_min());
     let plain = Env::from_world(world.clone(), SimConfig::default())
         .expect("env")
         .reset_with(Some(1), Some(Pose2::new(4.5, 6.0, 0.0)))

@@ -55,15 +55,19 @@ pub fn save_safetensors_as(
             store.with_to_adapter(BurnToPyTorchAdapter.chain(FloatCastAdapter::to(DType::F16)))
         }
     };
-    let inputs = "laser [B,4,512] range/5.6; depth [B,4,128,160] clamp(0,10)/5; NCHW";
-    let mut store = store.metadata("mdrlat_variant", config.variant.name()).metadata(
-        "mdrlat_inputs",
-        if config.goal_dim > 0 {
-            format!("{inputs}; goal [B,3] (distance/10 m, sin, cos of the bearing)")
-        } else {
-            inputs.to_string()
-        },
-    );
+    let mut inputs =
+        String::from("laser [B,4,512] range/5.6; depth [B,4,128,160] clamp(0,10)/5; NCHW");
+    if config.goal_dim > 0 {
+        inputs.push_str("; goal [B,3] (distance/10 m, sin, cos of the bearing)");
+    }
+    if config.depth_memory_frames > 0 {
+        inputs.push_str(&format!(
+            "; the laser's scan with {} frames of the camera's memory ({DEPTH_MEMORY_KEY})",
+            config.depth_memory_frames
+        ));
+    }
+    let mut store =
+        store.metadata("mdrlat_variant", config.variant.name()).metadata("mdrlat_inputs", inputs);
     if config.goal_dim > 0 {
         store = store.metadata("mdrlat_task", "nav");
     }

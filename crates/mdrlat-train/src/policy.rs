@@ -327,6 +327,17 @@ impl GreedyPolicy {
         ))
     }
 
+    /// Fits `sim` to the network: its task must be the network's ([`Self::check_task`]) and
+    /// it draws the scan the network reads ([`Self::adopt_scan`]). Every command that feeds
+    /// a trained network a simulator (eval, demo, diagnose, export's comparison) calls it.
+    ///
+    /// # Errors
+    /// Another task, or another scan, naming `what`.
+    pub fn fit_sim(&self, sim: &mut SimConfig, what: &str) -> Result<(), String> {
+        self.check_task(sim.task, what)?;
+        self.adopt_scan(sim, what)
+    }
+
     /// Makes `sim` draw the scan the network reads: a `sim` of the laser's own scan takes
     /// the network's memory (`sim.laser.depth_memory_frames`); one that asks for another
     /// is an error naming `what`. Everything that feeds a trained network observations

@@ -617,6 +617,7 @@ fn a_model_trained_on_the_scan_with_the_cameras_memory_says_so_everywhere() {
     let meta = mdrlat_train::export::safetensors_metadata(&run.join("model.safetensors"))
         .expect("metadata");
     assert_eq!(meta[mdrlat_train::export::DEPTH_MEMORY_KEY], "6");
+    assert!(meta["mdrlat_inputs"].contains("6 frames of the camera's memory"), "{meta:?}");
     let snapshot = std::fs::read_dir(run.join("snapshots")).expect("snapshots").next();
     let snapshot = snapshot.expect("one snapshot").expect("entry").path();
     for path in [run.clone(), run.join("checkpoint"), run.join("model.safetensors"), snapshot] {
@@ -631,6 +632,13 @@ fn a_model_trained_on_the_scan_with_the_cameras_memory_says_so_everywhere() {
         s.laser.depth_memory_frames = 3;
         let e = p.adopt_scan(&mut s, "--checkpoint x").expect_err("another memory");
         assert!(e.contains("--checkpoint x") && e.contains("depth_memory_frames = 3"), "{e}");
+        // `fit_sim` does both: the task first, then the scan.
+        let mut s = SimConfig::default();
+        p.fit_sim(&mut s, "x").expect("fitted");
+        assert_eq!(s.laser.depth_memory_frames, 6);
+        s.task = mdrlat_sim::config::Task::Nav;
+        let e = p.fit_sim(&mut s, "x").expect_err("another task");
+        assert!(e.contains("--task nav"), "{e}");
     }
     // A model of the laser's own scan refuses a simulator that draws the memory, and a warm
     // start across the two scans is an error naming both.

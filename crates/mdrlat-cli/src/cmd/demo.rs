@@ -86,8 +86,7 @@ fn load_model(dir: &std::path::Path, sim: &mut SimConfig) -> Result<GreedyPolicy
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("--model {}", dir.display()))?;
     let what = format!("--model {}", dir.display());
-    p.check_task(mdrlat_sim::config::Task::Avoid, &what).map_err(anyhow::Error::msg)?;
-    p.adopt_scan(sim, &what).map_err(anyhow::Error::msg)?;
+    p.fit_sim(sim, &what).map_err(anyhow::Error::msg)?;
     Ok(p.with_forward_batch(Some(super::bench_train::EVAL_FORWARD_BATCH)))
 }
 

@@ -52,8 +52,7 @@ pub fn run(a: &Args) -> Result<()> {
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("--checkpoint {}", a.checkpoint.display()))?;
     let mut sim = SimConfig { task: policy.task(), ..SimConfig::default() };
-    policy.check_task(sim.task, "--checkpoint").map_err(anyhow::Error::msg)?;
-    policy.adopt_scan(&mut sim, "--checkpoint").map_err(anyhow::Error::msg)?;
+    policy.fit_sim(&mut sim, "--checkpoint").map_err(anyhow::Error::msg)?;
     let mut rows = Vec::new();
     for name in &a.world {
         let world = load_world(name)?;

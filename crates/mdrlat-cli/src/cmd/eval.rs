@@ -233,9 +233,8 @@ fn network(
         p
     };
     let what = format!("{flag} {}", path.display());
-    p.check_task(sim.task, &what).map_err(anyhow::Error::msg)?;
     let mut sim = sim.clone();
-    p.adopt_scan(&mut sim, &what).map_err(anyhow::Error::msg)?;
+    p.fit_sim(&mut sim, &what).map_err(anyhow::Error::msg)?;
     let flops = p.config().decision_flops() as f64;
     Ok((p, flops, sim))
 }

@@ -58,7 +58,7 @@ fn test_worlds(task: Task) -> &'static [&'static str] {
 fn observations(policy: &mut GreedyPolicy, n: usize, seed: u64) -> Result<Vec<Observation>> {
     let worlds = test_worlds(policy.task());
     let mut sim = SimConfig { task: policy.task(), ..SimConfig::default() };
-    policy.adopt_scan(&mut sim, "--checkpoint").map_err(anyhow::Error::msg)?;
+    policy.fit_sim(&mut sim, "--checkpoint").map_err(anyhow::Error::msg)?;
     let per = n.div_ceil(worlds.len());
     let mut out = Vec::with_capacity(n);
     for (w, name) in worlds.iter().enumerate() {

@@ -48,14 +48,21 @@ pub fn run(a: &Args) -> Result<()> {
     let obs = env.observation();
     write_npy(&a.out.join("laser.npy"), &[LASER_BEAMS], obs.laser.latest())?;
     write_npy(&a.out.join("depth.npy"), &[DEPTH_ROWS, DEPTH_COLS], obs.depth.latest())?;
-    let d_min = obs.laser.latest().iter().copied().fold(f32::INFINITY, f32::min);
+    // The collision rule reads the laser's own scan; with the camera's memory on, the
+    // scan written and drawn can be nearer.
+    let scan_min = obs.laser.latest().iter().copied().fold(f32::INFINITY, f32::min);
+    let d_min = env.laser_d_min();
+    let memory = if scan_min < d_min {
+        format!(" (scan with the camera's memory {scan_min:.2} m)")
+    } else {
+        String::new()
+    };
     let caption = format!(
-        "{}  pose {:.2},{:.2},{:.0}deg  d_min {:.2} m",
+        "{}  pose {:.2},{:.2},{:.0}deg  d_min {d_min:.2} m{memory}",
         env.world().name,
         pose.x,
         pose.y,
         pose.yaw.to_degrees(),
-        d_min
     );
     let picture = snapshot(&env, &[], &caption, false, px_per_m(env.world(), 640.0));
     picture.save_png(&a.out.join("view.png"))?;
