@@ -276,6 +276,71 @@ pub fn draw_navigation(
     ))
 }
 
+/// Steps of approach drawn before each collision in [`draw_collisions`] (3 s at 0.2 s a
+/// step).
+pub const COLLISION_TAIL_STEPS: usize = 15;
+
+/// Where a policy collides in `world`: every episode of `records` that ended in a collision,
+/// replayed from its record, drawn on one top view as the robot where it ended (red) with
+/// its last [`COLLISION_TAIL_STEPS`] steps (a ring where they began), captioned with the
+/// collisions by kind and the obstacles the bumper hit most. Failures that cluster at one
+/// doorway or one piece of furniture show at a glance.
+///
+/// # Errors
+/// A replay did not end as its record did.
+pub fn draw_collisions(
+    world: &World,
+    sim: &SimConfig,
+    records: &[EpisodeRecord],
+    method: &str,
+) -> Result<Image, EvalError> {
+    let crashed: Vec<&EpisodeRecord> = records.iter().filter(|r| r.collision.is_some()).collect();
+    let (mut trail, mut robots) = (Vec::new(), Vec::new());
+    let mut kinds = std::collections::BTreeMap::<&str, usize>::new();
+    let mut hits = std::collections::BTreeMap::<&str, usize>::new();
+    for r in &crashed {
+        let capture = replay(world, sim, r, Vec::new())?;
+        let poses: Vec<_> =
+            std::iter::once(r.start).chain(capture.rows.iter().map(|row| row.info.pose)).collect();
+        let tail = &poses[poses.len().saturating_sub(COLLISION_TAIL_STEPS + 1)..];
+        trail.extend(tail.iter().map(|p| p.position()));
+        trail.push(Vec2::new(f32::NAN, f32::NAN));
+        if let Some(&pose) = tail.last() {
+            robots.push(RobotMark { pose, radius: sim.robot.radius_m, collided: true });
+        }
+        if let Some(c) = &r.collision {
+            *kinds.entry(collision_kind(c)).or_default() += 1;
+        }
+        if !r.hit.is_empty() {
+            *hits.entry(r.hit.as_str()).or_default() += 1;
+        }
+    }
+    let by_kind: Vec<String> = kinds.iter().map(|(k, n)| format!("{n} {k}")).collect();
+    let mut most: Vec<(&str, usize)> = hits.into_iter().collect();
+    most.sort_by_key(|&(h, n)| (std::cmp::Reverse(n), h));
+    let most: Vec<String> = most.iter().take(4).map(|(h, n)| format!("{h} {n}")).collect();
+    let mut caption = format!(
+        "{method} in {}: {} collisions in {} episodes",
+        world.name,
+        crashed.len(),
+        records.len()
+    );
+    if !by_kind.is_empty() {
+        caption.push_str(&format!(" ({})", by_kind.join(", ")));
+    }
+    if !most.is_empty() {
+        caption.push_str(&format!("; the bumper hit {}", most.join(", ")));
+    }
+    caption.push_str(&format!(
+        ". Each robot is drawn where its episode ended, with its last {:.0} s (ring: where \
+         they began).",
+        COLLISION_TAIL_STEPS as f32 * sim.dt_s
+    ));
+    let scene =
+        Scene { trail: &trail, robots: &robots, caption: Some(&caption), ..Scene::new(world) };
+    Ok(top_view(&scene, px_per_m(world, 640.0)))
+}
+
 /// Draws `record` (an episode of `world` evaluated with `sim`, the evaluation's settings:
 /// see [`crate::eval_sim_config`]), explaining why it was picked.
 ///

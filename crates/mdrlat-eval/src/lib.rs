@@ -26,7 +26,9 @@ pub mod report;
 pub mod run;
 pub mod snapshots;
 
-pub use figures::{EpisodeFigure, Pick, draw_episode, draw_navigation, pick_episodes};
+pub use figures::{
+    EpisodeFigure, Pick, draw_collisions, draw_episode, draw_navigation, pick_episodes,
+};
 pub use nav::{NavRecord, NavSummary, nav_records, navigation_csv, navigation_markdown};
 pub use protocol::{
     EpisodeRecord, EvalSettings, Progress, WorldEval, collision_kind, episode_seed,

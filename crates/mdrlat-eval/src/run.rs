@@ -8,13 +8,14 @@
 //!   summary.csv    one row per world: both success rates (mean ± std over runs), path, collisions
 //!   summary.md     the same as a table
 //!   navigation.csv, navigation.md   (navigation) time to goal, path against the shortest
-//!   figures/       (figures > 0) Figs. 6/7 of the picked episodes; Fig. 9 in navigation
+//!   figures/       (figures > 0) Figs. 6/7 of the picked episodes; WORLD-collisions.png, where
+//!                  every collision happened; Fig. 9 in navigation
 //! ```
 
 use crate::{
     EvalError, EvalSettings, NavRecord, NavSummary, Progress, Timing, WorldEval, WorldSummary,
-    draw_episode, draw_navigation, episodes_csv, eval_sim_config, evaluate_world, nav_records,
-    navigation_csv, navigation_markdown, pick_episodes, summary_csv, summary_markdown,
+    draw_collisions, draw_episode, draw_navigation, episodes_csv, eval_sim_config, evaluate_world,
+    nav_records, navigation_csv, navigation_markdown, pick_episodes, summary_csv, summary_markdown,
 };
 use mdrlat_core::Policy;
 use mdrlat_sim::SimConfig;
@@ -204,6 +205,14 @@ pub fn evaluate(
             fig.strip.save_png(&strip).map_err(|e| io(&strip, e))?;
             let top = dir.join(format!("{stem}-trajectory.png"));
             fig.trajectory.save_png(&top).map_err(|e| io(&top, e))?;
+        }
+        // Where the policy collides: every collision of the world on one map.
+        for (world, w) in worlds.iter().zip(&report.worlds) {
+            if w.eval.records.iter().any(|r| r.collision.is_some()) {
+                let fig = draw_collisions(world, &eval_sim, &w.eval.records, &w.summary.eval)?;
+                let path = dir.join(format!("{}-collisions.png", file_stem(&world.name)));
+                fig.save_png(&path).map_err(|e| io(&path, e))?;
+            }
         }
         // Fig. 9: the first K start/goal pairs of run 0 (the same for every method evaluated
         // with this seed), all on one map.

@@ -3,8 +3,8 @@
 
 use mdrlat_core::{Action, Observation, Policy, PolicyError, Sensors};
 use mdrlat_eval::{
-    EvalSettings, Pick, WorldEval, WorldSummary, draw_episode, episode_seed, episodes_csv,
-    eval_sim_config, evaluate_world, pick_episodes, summary_csv, summary_markdown,
+    EvalSettings, Pick, WorldEval, WorldSummary, draw_collisions, draw_episode, episode_seed,
+    episodes_csv, eval_sim_config, evaluate_world, pick_episodes, summary_csv, summary_markdown,
 };
 use mdrlat_sim::{MovingRule, Scripted, SimConfig};
 use mdrlat_world::World;
@@ -236,6 +236,44 @@ fn figures_replay_the_picked_episodes() {
     wrong.collision = Some(mdrlat_sim::Collision::LaserRange);
     let sim = eval_sim_config(&SimConfig::default(), &settings);
     let err = draw_episode(&w, &sim, &wrong, Pick::Longest).expect_err("diverges");
+    assert!(err.to_string().contains("replay"), "{err}");
+}
+
+#[test]
+fn the_collision_map_draws_every_collision_where_it_happened() {
+    // `forward` drives into whatever is ahead: most episodes end in a collision.
+    let w = world("office");
+    let settings = EvalSettings { max_steps: 120, ..small(5, 4) };
+    let e = eval(&w, Scripted::Forward, &settings);
+    let crashed: Vec<_> = e.records.iter().filter(|r| r.collision.is_some()).cloned().collect();
+    assert!(crashed.len() >= 4, "{} collisions", crashed.len());
+    let sim = eval_sim_config(&SimConfig::default(), &settings);
+    let red = |img: &mdrlat_render::Image| {
+        let mut n = 0;
+        for y in 0..img.height {
+            for x in 0..img.width {
+                let [r, g, b, _] = img.pixel(x, y).expect("inside");
+                n += usize::from(r > 180 && g < 90 && b < 90);
+            }
+        }
+        n
+    };
+    let all = draw_collisions(&w, &sim, &e.records, "forward").expect("replays");
+    assert_eq!(all, draw_collisions(&w, &sim, &e.records, "forward").expect("again"));
+    // The legend's swatch is red in every picture; each crashed robot adds its disc.
+    let none: Vec<_> = e.records.iter().filter(|r| r.collision.is_none()).cloned().collect();
+    let (n_all, n_one, n_none) = (
+        red(&all),
+        red(&draw_collisions(&w, &sim, &crashed[..1], "forward").expect("one")),
+        red(&draw_collisions(&w, &sim, &none, "forward").expect("none")),
+    );
+    assert!(n_all > n_one && n_one > n_none, "{n_all} {n_one} {n_none}");
+    // A record its seed and actions do not give is refused, not drawn.
+    let mut wrong = crashed[0].clone();
+    wrong.steps += 1;
+    wrong.actions.push(Action::new(1).expect("action"));
+    wrong.commands.push(wrong.actions[0].command());
+    let err = draw_collisions(&w, &sim, &[wrong], "forward").expect_err("diverges");
     assert!(err.to_string().contains("replay"), "{err}");
 }
 

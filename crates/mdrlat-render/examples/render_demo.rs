@@ -69,6 +69,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             trail: &trail,
             goal: Some(Vec2::new(5.0, 9.0)),
             goals: &[],
+            robots: &[],
             caption: Some(&caption),
         };
         frames.push(top_view(&scene, 60.0));

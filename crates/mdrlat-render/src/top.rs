@@ -35,6 +35,8 @@ pub struct Scene<'a> {
     pub goal: Option<Vec2>,
     /// Further goals, marked as `goal` is (several episodes in one picture).
     pub goals: &'a [Vec2],
+    /// Further robots, drawn as `robot` is (where several episodes ended, in one picture).
+    pub robots: &'a [RobotMark],
     /// A line (or several, split at `\n`, wrapped to the picture's width, at most 40) drawn
     /// below the map, e.g. `"train  step 42  v 0.50 w -0.26  r 0.47"`.
     pub caption: Option<&'a str>,
@@ -51,6 +53,7 @@ impl<'a> Scene<'a> {
             trail: &[],
             goal: None,
             goals: &[],
+            robots: &[],
             caption: None,
         }
     }
@@ -629,7 +632,7 @@ fn draw_marks(pm: &mut Pixmap, lay: &Layout, scene: &Scene) {
             stroke(pm, &p, style::GOAL_DARK, 255, 1.0 * ts);
         }
     }
-    if let Some(r) = &scene.robot {
+    for r in scene.robots.iter().chain(&scene.robot) {
         draw_robot(pm, f, r, ts);
     }
 }

@@ -60,6 +60,7 @@ fn frame(world: &mdrlat_world::World, step: usize, trail: &mut Vec<Vec2>) -> Ima
         trail,
         goal: Some(Vec2::new(5.0, 9.0)),
         goals: &[],
+        robots: &[],
         caption: Some(&caption),
     };
     let top = top_view(&scene, 60.0);
