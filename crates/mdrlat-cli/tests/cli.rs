@@ -517,8 +517,26 @@ fn eval_writes_reproducible_results_and_refuses_bad_input() {
          collision_kind,hit,path_m,reach_m,return,min_path_m,min_reach_m\n"
     ));
     assert_eq!(episodes.lines().count(), 1 + 2 * 2 * 4);
-    let figures: Vec<_> = std::fs::read_dir(a.join("figures")).expect("figures").collect();
-    assert_eq!(figures.len(), 4, "a strip and a trajectory per picked episode");
+    let figures: Vec<String> = std::fs::read_dir(a.join("figures"))
+        .expect("figures")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    let (maps, episode_figures): (Vec<_>, Vec<_>) =
+        figures.iter().partition(|f| f.ends_with("-collisions.png"));
+    assert_eq!(episode_figures.len(), 4, "a strip and a trajectory per picked episode");
+    // A collision map for each world where an episode ended in a collision.
+    let mut collided: Vec<String> = episodes
+        .lines()
+        .skip(1)
+        .filter(|l| l.split(',').nth(10) == Some("1"))
+        .map(|l| format!("{}-collisions.png", l.split(',').next().expect("world")))
+        .collect();
+    collided.sort();
+    collided.dedup();
+    let mut maps: Vec<String> = maps.into_iter().cloned().collect();
+    maps.sort();
+    assert!(!collided.is_empty(), "wander collides somewhere");
+    assert_eq!(maps, collided);
     // Same seed, same bytes (with other --envs); an existing evaluation is not replaced.
     let (o, b) = run("b", &["--figures", "2", "--envs", "3"]);
     assert!(o.status.success(), "{}", stderr(&o));
