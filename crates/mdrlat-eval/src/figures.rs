@@ -297,7 +297,6 @@ pub fn draw_collisions(
     let crashed: Vec<&EpisodeRecord> = records.iter().filter(|r| r.collision.is_some()).collect();
     let (mut trail, mut robots) = (Vec::new(), Vec::new());
     let mut kinds = std::collections::BTreeMap::<&str, usize>::new();
-    let mut hits = std::collections::BTreeMap::<&str, usize>::new();
     for r in &crashed {
         let capture = replay(world, sim, r, Vec::new())?;
         let poses: Vec<_> =
@@ -311,14 +310,13 @@ pub fn draw_collisions(
         if let Some(c) = &r.collision {
             *kinds.entry(collision_kind(c)).or_default() += 1;
         }
-        if !r.hit.is_empty() {
-            *hits.entry(r.hit.as_str()).or_default() += 1;
-        }
     }
     let by_kind: Vec<String> = kinds.iter().map(|(k, n)| format!("{n} {k}")).collect();
-    let mut most: Vec<(&str, usize)> = hits.into_iter().collect();
-    most.sort_by_key(|&(h, n)| (std::cmp::Reverse(n), h));
-    let most: Vec<String> = most.iter().take(4).map(|(h, n)| format!("{h} {n}")).collect();
+    let most: Vec<String> = crate::report::bumper_hits(records)
+        .iter()
+        .take(4)
+        .map(|(h, n)| format!("{h} {n}"))
+        .collect();
     let mut caption = format!(
         "{method} in {}: {} collisions in {} episodes",
         world.name,

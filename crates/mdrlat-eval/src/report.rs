@@ -56,10 +56,10 @@ pub fn episode_row(r: &EpisodeRecord, rule: &MovingRule) -> String {
     )
 }
 
-/// Each obstacle the bumper hit with its count, most hit first (ties by label).
-fn bumper_hits(w: &WorldEval) -> Vec<(String, u32)> {
+/// Each obstacle the bumper hit in `records` with its count, most hit first (ties by label).
+pub(crate) fn bumper_hits(records: &[EpisodeRecord]) -> Vec<(String, u32)> {
     let mut counts = std::collections::BTreeMap::<&str, u32>::new();
-    for r in w.records.iter().filter(|r| !r.hit.is_empty()) {
+    for r in records.iter().filter(|r| !r.hit.is_empty()) {
         *counts.entry(&r.hit).or_default() += 1;
     }
     let mut v: Vec<(String, u32)> = counts.into_iter().map(|(k, n)| (k.to_string(), n)).collect();
@@ -203,7 +203,7 @@ impl WorldSummary {
             return_mean: round(avg(|r| f64::from(r.ret)), 4),
             navigation: w.records.iter().any(|r| r.goal.is_some()),
             action_shares: action_shares(w),
-            bumper_hits: bumper_hits(w),
+            bumper_hits: bumper_hits(&w.records),
         }
     }
 
