@@ -377,6 +377,67 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
 
 /// `train.snapshot_minutes` and `mdrlat eval --snapshots`: every snapshot by the protocol,
 /// then success against minutes (table and figure); a run without snapshots is a clear error.
+/// Ctrl-C (SIGINT) stops a training run with a checkpoint where it stopped and one error
+/// line saying how to continue; `--resume` finishes it.
+#[test]
+fn an_interrupted_train_writes_its_checkpoint_and_says_how_to_resume() {
+    use std::process::{Command, Stdio};
+    let d = tmp("train-sigint");
+    let run = d.join("run");
+    let r = run.to_str().expect("utf8");
+    let args = [
+        "train",
+        "--variant",
+        "laser-only",
+        "--world",
+        "example",
+        "--steps",
+        "1000000",
+        "--seed",
+        "3",
+        "--out",
+        r,
+        "--set",
+        "train.learning_starts=40",
+        "--set",
+        "train.checkpoint_interval=1000000",
+        "--set",
+        "train.eval_interval=1000000",
+    ];
+    let child = Command::new(common::EXE)
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    // Wait until it trains (its first metrics row), then interrupt it.
+    let metrics = run.join("metrics.csv");
+    let t0 = std::time::Instant::now();
+    while std::fs::read_to_string(&metrics).map_or(0, |m| m.lines().count()) < 2 {
+        assert!(t0.elapsed().as_secs() < 120, "no metrics row within 2 minutes");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status();
+    assert!(kill.expect("kill").success());
+    let o = child.wait_with_output().expect("wait");
+    assert_clean_failure(&o, &["stopped at step", "--resume", r]);
+    let meta = std::fs::read_to_string(run.join("checkpoint/meta.json")).expect("checkpoint");
+    let step: u64 = stderr(&o)
+        .split("stopped at step ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .expect("the step in the message");
+    assert!(step > 0 && meta.contains(&format!("\"step\":{step}")), "{meta}");
+    assert!(!run.join("model.safetensors").exists(), "a stopped run is not a finished one");
+    // Resumed with a reachable end, it finishes.
+    let end = (step + 20).to_string();
+    let o = mdrlat(&["train", "--resume", r, "--steps", &end]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(run.join("model.safetensors").is_file());
+    let _ = std::fs::remove_dir_all(&d);
+}
+
 #[test]
 fn eval_snapshots_measures_success_against_minutes_of_training() {
     let d = tmp("snapshots");

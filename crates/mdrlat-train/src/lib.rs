@@ -33,7 +33,7 @@ pub use run_dir::{RunDir, RunInfo};
 pub use settings::{Config, Preset};
 pub use sink::MetricsSink;
 pub use timing::Timing;
-pub use train::{Status, TrainReport, train};
+pub use train::{Status, TrainReport, train, train_until};
 
 /// Readies the process for work on `device`. On a LibTorch GPU, LibTorch's CPU thread pool
 /// shrinks to one thread: with one thread a core it took the cores from rayon's threads

@@ -17,6 +17,7 @@ use mdrlat_nn::burn::prelude::Device;
 use mdrlat_sim::VecEnv;
 use mdrlat_sim::config::Task;
 use mdrlat_world::World;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Where training is, for progress bars.
@@ -49,6 +50,9 @@ pub struct TrainReport {
     pub seconds: f64,
     /// Where that time went.
     pub timing: Timing,
+    /// The run was asked to stop ([`train_until`]) before `total_steps`: it wrote a
+    /// checkpoint at `steps`, from which `--resume` continues exactly.
+    pub stopped: bool,
 }
 
 /// Trains `config.variant` in `envs` (one environment per `train.envs`, freshly built: the
@@ -61,12 +65,31 @@ pub struct TrainReport {
 /// Invalid settings, a simulator failure, a missing or bad checkpoint, or a file that
 /// cannot be written.
 pub fn train(
+    envs: TrainEnvs,
+    config: &TrainConfig,
+    device: &Device,
+    dir: &RunDir,
+    resume: bool,
+    progress: impl FnMut(&Status),
+) -> Result<(TrainReport, Learner), TrainError> {
+    train_until(envs, config, device, dir, resume, progress, &AtomicBool::new(false))
+}
+
+/// [`train`], stopping early once `stop` is set (by a signal handler, say): the tick under
+/// way finishes, a checkpoint is written at its step whatever `train.checkpoint_interval`
+/// and `train.final_checkpoint` say, and the report says `stopped`. Nothing is lost: the
+/// run resumes from there exactly as if it had not stopped.
+///
+/// # Errors
+/// As [`train`].
+pub fn train_until(
     mut envs: TrainEnvs,
     config: &TrainConfig,
     device: &Device,
     dir: &RunDir,
     resume: bool,
     mut progress: impl FnMut(&Status),
+    stop: &AtomicBool,
 ) -> Result<(TrainReport, Learner), TrainError> {
     config.validate()?;
     if envs.len() != config.envs {
@@ -188,6 +211,8 @@ pub fn train(
             clock.split(|t| &mut t.output);
         }
         done_steps += envs.len() as u64;
+        let stopping = stop.load(Ordering::Relaxed) && done_steps < config.total_steps;
+        checkpoint_due |= stopping;
         if let Some(minute) = snapshots.due(trained()) {
             let minutes = trained() / 60.0;
             dir.save_snapshot(&learner, done_steps, minute, minutes, config.model_precision)?;
@@ -200,10 +225,14 @@ pub fn train(
             checkpoint::save(dir.path(), &mut run, &learner, &replay, trained())?;
             clock.split(|t| &mut t.output);
         }
+        if stopping {
+            report.stopped = true;
+            break;
+        }
     }
     sink.flush()?;
     (report.steps, report.updates, report.episodes) =
-        (config.total_steps, learner.updates(), run.episodes);
+        (done_steps.min(config.total_steps), learner.updates(), run.episodes);
     (report.seconds, report.timing) = (started.elapsed().as_secs_f64(), clock.timing);
     Ok((report, learner))
 }

@@ -98,6 +98,44 @@ fn an_interrupted_run_resumes_exactly() {
     assert_eq!(read(&end, "metrics.csv"), before);
 }
 
+#[test]
+fn a_run_asked_to_stop_checkpoints_where_it_stopped_and_resumes_exactly() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let dev = Device::flex();
+    let straight = dir("stop-straight");
+    let (_, a) = laser_only(world(), &sim(), 300, &straight, false).expect("run");
+
+    // Asked to stop at step 130 (between the 100-step checkpoints, inside a log window),
+    // with no final checkpoint wanted: it still writes one at 130, and says it stopped.
+    let cut = dir("stop-cut");
+    let cfg = |steps| TrainConfig { final_checkpoint: false, ..config(Variant::LaserOnly, steps) };
+    let stop = AtomicBool::new(false);
+    let envs = mdrlat_train::TrainEnvs::new(vec![world()], &sim(), 1).expect("envs");
+    let run = mdrlat_train::RunDir::at(&cut);
+    let on_step = |s: &mdrlat_train::Status| {
+        if s.step == 130 {
+            stop.store(true, Ordering::Relaxed);
+        }
+    };
+    let (report, _) = mdrlat_train::train_until(envs, &cfg(300), &dev, &run, false, on_step, &stop)
+        .expect("stopped");
+    assert!(report.stopped);
+    assert_eq!(report.steps, 130);
+    assert!(read(&cut, "checkpoint/meta.json").contains("\"step\":130"), "checkpoint at 130");
+    // Resumed, it is the run that never stopped: same weights, same curves.
+    let (report, b) =
+        train(vec![world()], &sim(), &config(Variant::LaserOnly, 300), &dev, &cut, true, |_| {})
+            .expect("resume");
+    assert!(!report.stopped);
+    assert_eq!(report.steps, 300);
+    assert_eq!(probe(&a), probe(&b), "same weights");
+    assert_eq!(read(&straight, "metrics.csv"), read(&cut, "metrics.csv"));
+    assert_eq!(read(&straight, "eval.csv"), read(&cut, "eval.csv"));
+    for d in [straight, cut] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}
+
 /// Several environments over several worlds, with several gradient steps at a time and
 /// 3-step returns, resume exactly too: every environment's world, episode, frames and waiting
 /// steps are in the checkpoint, which is written once a tick has stepped them all.

@@ -154,11 +154,14 @@ pub struct Args {
 }
 
 /// SIGINT and SIGTERM set the returned flag (instead of killing the process), so a node can
-/// stop its robot before exiting.
+/// stop its robot before exiting, and a training run can write its checkpoint; a second one
+/// exits at once (status 130).
 pub fn stop_flag() -> Result<Arc<AtomicBool>> {
     let stop = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, stop.clone())
+        // Registered first, so the first signal finds the flag unset and only sets it.
+        signal_hook::flag::register_conditional_shutdown(signal, 130, stop.clone())
+            .and_then(|_| signal_hook::flag::register(signal, stop.clone()))
             .with_context(|| format!("cannot handle signal {signal}"))?;
     }
     Ok(stop)

@@ -237,9 +237,29 @@ pub fn run(a: &Args) -> Result<()> {
             ));
         }
     };
-    let (report, learner) =
-        mdrlat_train::train(envs, &config.train, &device.device(), &dir, resume, on_step)?;
+    // Ctrl-C (or SIGTERM) stops at the end of the tick under way with a checkpoint there;
+    // a second one exits at once.
+    let stop = super::ros::stop_flag()?;
+    let (report, learner) = mdrlat_train::train_until(
+        envs,
+        &config.train,
+        &device.device(),
+        &dir,
+        resume,
+        on_step,
+        &stop,
+    )?;
     pb.finish_and_clear();
+    if report.stopped {
+        anyhow::bail!(
+            "stopped at step {} of {} by a signal: the checkpoint at step {} holds the whole \
+             run; continue it with `mdrlat train --resume {}`",
+            report.steps,
+            total,
+            report.steps,
+            dir.path().display()
+        );
+    }
     dir.finish(&learner, report.steps, &config.train)?;
     let last = report.evaluations.last().map(|e| {
         let reached = if config.sim.task == Task::Nav {
