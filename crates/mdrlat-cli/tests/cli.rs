@@ -241,23 +241,31 @@ fn config_default_round_trips_and_bad_configs_are_rejected() {
     );
 }
 
-#[test]
-fn train_writes_a_run_directory_and_never_overwrites_one() {
-    let d = tmp("train");
-    let run = d.join("run");
-    let r = run.to_str().expect("utf8");
-    let args = [
+/// `mdrlat train` of a seed-3 laser-only run in `example` for `steps` steps into `out`;
+/// callers add their `--set`s.
+fn laser_only_train<'a>(steps: &'a str, out: &'a str) -> Vec<&'a str> {
+    vec![
         "train",
         "--variant",
         "laser-only",
         "--world",
         "example",
         "--steps",
-        "120",
+        steps,
         "--seed",
         "3",
         "--out",
-        r,
+        out,
+    ]
+}
+
+#[test]
+fn train_writes_a_run_directory_and_never_overwrites_one() {
+    let d = tmp("train");
+    let run = d.join("run");
+    let r = run.to_str().expect("utf8");
+    let mut args = laser_only_train("120", r);
+    args.extend([
         "--set",
         "train.learning_starts=40",
         "--set",
@@ -268,7 +276,7 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
         "sim.max_episode_steps=30",
         "--set",
         "train.checkpoint_interval=100",
-    ];
+    ]);
     let o = mdrlat(&args);
     assert!(o.status.success(), "{}", stderr(&o));
     for f in ["config.toml", "run.toml", "metrics.csv", "eval.csv", "model.safetensors"] {
@@ -375,8 +383,6 @@ fn train_writes_a_run_directory_and_never_overwrites_one() {
     assert!(!std::fs::read_to_string(run.join("config.toml")).expect("cfg").contains("init_from"));
 }
 
-/// `train.snapshot_minutes` and `mdrlat eval --snapshots`: every snapshot by the protocol,
-/// then success against minutes (table and figure); a run without snapshots is a clear error.
 /// Ctrl-C (SIGINT) stops a training run with a checkpoint where it stopped and one error
 /// line saying how to continue; `--resume` finishes it.
 #[test]
@@ -385,25 +391,15 @@ fn an_interrupted_train_writes_its_checkpoint_and_says_how_to_resume() {
     let d = tmp("train-sigint");
     let run = d.join("run");
     let r = run.to_str().expect("utf8");
-    let args = [
-        "train",
-        "--variant",
-        "laser-only",
-        "--world",
-        "example",
-        "--steps",
-        "1000000",
-        "--seed",
-        "3",
-        "--out",
-        r,
+    let mut args = laser_only_train("1000000", r);
+    args.extend([
         "--set",
         "train.learning_starts=40",
         "--set",
         "train.checkpoint_interval=1000000",
         "--set",
         "train.eval_interval=1000000",
-    ];
+    ]);
     let child = Command::new(common::EXE)
         .args(args)
         .stdout(Stdio::null())
@@ -438,6 +434,8 @@ fn an_interrupted_train_writes_its_checkpoint_and_says_how_to_resume() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
+/// `train.snapshot_minutes` and `mdrlat eval --snapshots`: every snapshot by the protocol,
+/// then success against minutes (table and figure); a run without snapshots is a clear error.
 #[test]
 fn eval_snapshots_measures_success_against_minutes_of_training() {
     let d = tmp("snapshots");
