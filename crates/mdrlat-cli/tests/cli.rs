@@ -499,6 +499,41 @@ fn eval_snapshots_measures_success_against_minutes_of_training() {
         out.to_str().expect("utf8"),
     ]);
     assert_clean_failure(&again, &["--overwrite"]);
+    // --only-new keeps what was evaluated and evaluates the rest: with one snapshot's
+    // evaluation left unfinished (no summary.csv), only that one runs again, to the same bytes.
+    let o_str = out.to_str().expect("utf8");
+    let only_new = |episodes: &str| {
+        mdrlat(&[
+            "eval",
+            "--snapshots",
+            r,
+            "--world",
+            "crowd",
+            "--episodes",
+            episodes,
+            "--runs",
+            "1",
+            "--max-steps",
+            "30",
+            "--out",
+            o_str,
+            "--only-new",
+        ])
+    };
+    std::fs::remove_file(first.join("summary.csv")).expect("rm summary.csv");
+    let o = only_new("2");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(said.matches("kept from").count(), snapshots.len() - 1, "{said}");
+    assert!(first.join("summary.csv").is_file());
+    assert_eq!(std::fs::read_to_string(out.join("snapshots.csv")).expect("csv"), csv);
+    // Another protocol is refused, not mixed in; and --only-new needs --snapshots.
+    assert_clean_failure(&only_new("3"), &["summary.csv", "other settings", "--only-new"]);
+    let e = d.join("e").to_str().expect("utf8").to_owned();
+    assert_clean_failure(
+        &mdrlat(&["eval", "--policy", "spin", "--out", &e, "--only-new"]),
+        &["--snapshots"],
+    );
     let elsewhere = d.join("elsewhere");
     let e = elsewhere.to_str().expect("utf8");
     assert_clean_failure(

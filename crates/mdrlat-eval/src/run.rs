@@ -15,7 +15,8 @@
 use crate::{
     EvalError, EvalSettings, NavRecord, NavSummary, Progress, Timing, WorldEval, WorldSummary,
     draw_collisions, draw_episode, draw_navigation, episodes_csv, eval_sim_config, evaluate_world,
-    nav_records, navigation_csv, navigation_markdown, pick_episodes, summary_csv, summary_markdown,
+    nav_records, navigation_csv, navigation_markdown, parse_summary_csv, pick_episodes,
+    summary_csv, summary_markdown,
 };
 use mdrlat_core::Policy;
 use mdrlat_sim::SimConfig;
@@ -179,7 +180,6 @@ pub fn evaluate(
     let evals: Vec<&WorldEval> = report.worlds.iter().map(|w| &w.eval).collect();
     let summaries: Vec<WorldSummary> = report.worlds.iter().map(|w| w.summary.clone()).collect();
     write(&out.dir.join("episodes.csv"), &episodes_csv(evals.iter().copied(), &settings.moving))?;
-    write(&out.dir.join("summary.csv"), &summary_csv(&summaries))?;
     write(&out.dir.join("summary.md"), &summary_markdown(&summaries))?;
     report.written.extend(["episodes.csv", "summary.csv", "summary.md"]);
     let navigation: Vec<(&WorldEval, &(NavSummary, Vec<NavRecord>))> =
@@ -225,7 +225,66 @@ pub fn evaluate(
         }
         report.written.push("figures/");
     }
+    // Last: a folder with a summary.csv holds a finished evaluation (`earlier_evaluation`).
+    write(&out.dir.join("summary.csv"), &summary_csv(&summaries))?;
     Ok(report)
+}
+
+/// The finished evaluation in `dir` that stands for the one `settings` would make of the
+/// policy named `policy` in `worlds`, if there is one: its `summary.csv` (written last, so
+/// present only once everything else is) read back. `Ok(None)`: nothing finished there.
+/// `mdrlat eval --snapshots --only-new` keeps the snapshots it evaluated before this way.
+///
+/// # Errors
+/// A `summary.csv` that cannot be read, or one of other worlds, settings (episodes, runs,
+/// step budget, seed, moving rule) or another policy: never silently mixed in.
+pub fn earlier_evaluation(
+    dir: &Path,
+    policy: &str,
+    worlds: &[World],
+    settings: &EvalSettings,
+) -> Result<Option<Vec<WorldSummary>>, EvalError> {
+    let path = dir.join("summary.csv");
+    let text = match std::fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(io(&path, e)),
+    };
+    let rows = parse_summary_csv(&text, &path.display().to_string()).map_err(EvalError::Output)?;
+    let other = |what: String| {
+        EvalError::Output(format!(
+            "{} holds an evaluation of {what}: choose another folder, or overwrite it",
+            path.display()
+        ))
+    };
+    let names: Vec<&str> = rows.iter().map(|r| r.world.as_str()).collect();
+    let wanted: Vec<&str> = worlds.iter().map(|w| w.name.as_str()).collect();
+    if names != wanted {
+        return Err(other(format!("the worlds {names:?}, not {wanted:?}")));
+    }
+    let m = &settings.moving;
+    let rule = |path: f64, reach: f64| format!("{path:.3} m driven, {reach:.3} m reached");
+    for r in &rows {
+        if r.eval != policy {
+            return Err(other(format!("'{}', not '{policy}'", r.eval)));
+        }
+        let theirs = (r.episodes, r.runs, r.max_steps, r.seed, rule(r.min_path_m, r.min_reach_m));
+        let ours = (
+            settings.episodes,
+            settings.runs,
+            settings.max_steps,
+            settings.seed,
+            rule(f64::from(m.min_path_m), f64::from(m.min_reach_m)),
+        );
+        if theirs != ours {
+            return Err(other(format!(
+                "other settings in {} (episodes, runs, steps, seed, moving rule: {theirs:?}, \
+                 not {ours:?})",
+                r.world
+            )));
+        }
+    }
+    Ok(Some(rows))
 }
 
 /// A file-name-safe form of a world's name.

@@ -36,6 +36,11 @@ pub struct Args {
     /// navigation run: goals reached against minutes).
     #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["policy", "checkpoint"])]
     snapshots: Option<PathBuf>,
+    /// With --snapshots: keep the snapshots evaluated before in --out by the same protocol
+    /// (their summary.csv read back; one of other settings is refused) and evaluate only the
+    /// rest, so that the curve of a run still training is brought up to date in minutes.
+    #[arg(long, conflicts_with = "overwrite")]
+    only_new: bool,
     /// A policy that needs no training instead: random, forward, wander, wander-laser, spin,
     /// circle, avoid, avoid-laser or avoid-stack (`wander` and the classical `avoid` are the
     /// non-learned baseline rows; `avoid-laser`, the avoider on the laser alone, is the
@@ -131,6 +136,7 @@ impl Args {
         Ok(Args {
             checkpoint,
             snapshots: None,
+            only_new: false,
             policy,
             worlds: e.worlds.clone(),
             // As the command line it shows as: `--task` only when not the default.
@@ -174,6 +180,9 @@ pub fn run(a: &Args) -> Result<()> {
 fn prepare(a: &Args, cores: usize) -> Result<(EvalSettings, Config, Vec<mdrlat_world::World>)> {
     if a.threads == Some(0) || a.threads.is_some_and(|t| t > 1024) {
         bail!("--threads {}: must be 1 to 1024", a.threads.unwrap_or_default());
+    }
+    if a.only_new && a.snapshots.is_none() {
+        bail!("--only-new keeps the evaluated snapshots of --snapshots RUN_DIR: give that");
     }
     let settings = EvalSettings {
         episodes: a.episodes,
@@ -339,10 +348,23 @@ fn run_snapshots(
 ) -> Result<()> {
     let snapshots = snapshots_of(run)?;
     // Every folder checked before the first evaluation, not after some are done; with
-    // --overwrite, an earlier evaluation's folders of snapshots that no longer exist go.
+    // --overwrite, an earlier evaluation's folders of snapshots that no longer exist go;
+    // with --only-new, a snapshot's finished evaluation is kept (an unfinished one redone).
     let names: Vec<String> = snapshots.iter().map(|(m, _)| snapshot_name(*m)).collect();
-    for name in &names {
-        mdrlat_eval::prepare_output(&a.out.join(name), a.overwrite).map_err(flag_hint)?;
+    let mut kept: Vec<Option<Vec<mdrlat_eval::WorldSummary>>> = Vec::new();
+    for ((_, path), name) in snapshots.iter().zip(&names) {
+        let dir = a.out.join(name);
+        let earlier = if a.only_new && dir.join("summary.csv").exists() {
+            let label = network(a, path, "--snapshots", 1, &config.sim)?.0.name();
+            mdrlat_eval::run::earlier_evaluation(&dir, &label, worlds, settings)
+                .map_err(|e| anyhow::anyhow!("{e} (or leave out --only-new)"))?
+        } else {
+            None
+        };
+        if earlier.is_none() {
+            mdrlat_eval::prepare_output(&dir, a.overwrite || a.only_new).map_err(flag_hint)?;
+        }
+        kept.push(earlier);
     }
     if a.overwrite {
         for entry in std::fs::read_dir(&a.out).with_context(|| a.out.display().to_string())? {
@@ -354,33 +376,48 @@ fn run_snapshots(
             }
         }
     }
-    let total = (settings.episodes_per_world() * worlds.len() * snapshots.len()) as u64;
+    let fresh = kept.iter().filter(|k| k.is_none()).count();
+    let total = (settings.episodes_per_world() * worlds.len() * fresh) as u64;
     let mut shown = Shown { pb: progress::bar(total, "eval"), json: a.json, offset: 0 };
     let mut rows = Vec::new();
     let mut cpus: Vec<String> = Vec::new();
     let per_snapshot = (settings.episodes_per_world() * worlds.len()) as u64;
-    for (k, (minute, path)) in snapshots.iter().enumerate() {
-        let (mut p, flops, sim) = network(a, path, "--snapshots", cores, &config.sim)?;
+    let mut evaluated = 0;
+    for (((minute, path), name), earlier) in snapshots.iter().zip(&names).zip(kept) {
         let meta = mdrlat_train::export::safetensors_metadata(&path.join("model.safetensors"))
             .map_err(anyhow::Error::msg)?;
-        let name = snapshot_name(*minute);
-        let dir = a.out.join(&name);
-        let out = Output { dir: &dir, overwrite: a.overwrite, figures: a.figures };
-        shown.offset = k as u64 * per_snapshot;
-        if !a.json {
-            let step = meta.get("mdrlat_step").map_or(String::new(), |s| format!(", step {s}"));
-            shown.pb.suspend(|| out!("{name}{step}:"));
-        }
-        let report = mdrlat_eval::evaluate(
-            worlds,
-            &sim,
-            settings,
-            Agent::One(&mut p),
-            Some(flops),
-            &out,
-            &mut shown,
-        )
-        .map_err(flag_hint)?;
+        let step = meta.get("mdrlat_step").map_or(String::new(), |s| format!(", step {s}"));
+        let summaries = match earlier {
+            Some(summaries) => {
+                if !a.json {
+                    shown
+                        .pb
+                        .suspend(|| out!("{name}{step}: kept from {}", a.out.join(name).display()));
+                }
+                summaries
+            }
+            None => {
+                let (mut p, flops, sim) = network(a, path, "--snapshots", cores, &config.sim)?;
+                let dir = a.out.join(name);
+                let out = Output { dir: &dir, overwrite: true, figures: a.figures };
+                shown.offset = evaluated * per_snapshot;
+                evaluated += 1;
+                if !a.json {
+                    shown.pb.suspend(|| out!("{name}{step}:"));
+                }
+                let report = mdrlat_eval::evaluate(
+                    worlds,
+                    &sim,
+                    settings,
+                    Agent::One(&mut p),
+                    Some(flops),
+                    &out,
+                    &mut shown,
+                )
+                .map_err(flag_hint)?;
+                report.worlds.into_iter().map(|w| w.summary).collect()
+            }
+        };
         let cpu = meta.get("mdrlat_cpu").cloned().unwrap_or_else(|| "an unrecorded CPU".into());
         if !cpus.contains(&cpu) {
             cpus.push(cpu);
@@ -392,7 +429,7 @@ fn run_snapshots(
                 .unwrap_or(*minute),
             training_minutes: meta.get("mdrlat_training_minutes").and_then(|m| m.parse().ok()),
             step: meta.get("mdrlat_step").and_then(|s| s.parse().ok()),
-            worlds: report.worlds.into_iter().map(|w| w.summary).collect(),
+            worlds: summaries,
         });
     }
     shown.pb.finish_and_clear();
