@@ -249,6 +249,8 @@ mod tests {
         assert_eq!(plain, Config::default().sim, "fast changes no other simulator setting");
         assert_ne!(fast.train, Config::default().train);
         assert!(fast.train.envs > 1);
+        // The budget every fast-preset model was trained with, not the paper's 400k.
+        assert_eq!(fast.train.total_steps, 100_000);
         let dir = std::env::temp_dir().join(format!("mdrlat-preset-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("dir");
         let path = dir.join("c.toml");
