@@ -44,6 +44,7 @@ pub fn random_batch(variant: Variant, size: usize, seed: u64) -> Batch {
         goal: Vec::new(),
         next_goal: Vec::new(),
         depth_frames: Default::default(),
+        weights: Vec::new(),
     }
 }
 

@@ -124,6 +124,10 @@ pub struct Meta {
     /// The environments after the first (`train.envs` > 1), in order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub more_envs: Vec<EnvSlot>,
+    /// The replay's priorities, with prioritised replay (`train.priority_alpha` > 0;
+    /// absent otherwise, as in every checkpoint before it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub priorities: Option<crate::priority::PriorityState>,
     /// Bytes of `replay.bin`.
     pub replay_bytes: u64,
     /// FNV-1a 64 of `replay.bin`.
@@ -243,6 +247,7 @@ pub fn save(
         .map_err(|e| bad(&replay_path, e.to_string()))?;
     meta.replay_bytes = w.bytes;
     meta.replay_checksum = w.hash;
+    meta.priorities = replay.priorities().map(|p| p.state(replay.len()));
     let meta_path = tmp.join("meta.json");
     let text = serde_json::to_string(meta).map_err(|e| bad(&meta_path, e.to_string()))?;
     File::create(&meta_path)
@@ -391,6 +396,33 @@ pub fn load(
     if r.hash != meta.replay_checksum {
         return Err(bad(&replay_path, "checksum mismatch: the file is corrupt"));
     }
+    let priorities = match (&meta.priorities, config.priority_alpha > 0.0) {
+        (None, false) => None,
+        (Some(state), true) => Some(
+            crate::priority::Priorities::restore(
+                cap,
+                config.priority_alpha,
+                config.priority_epsilon,
+                state,
+                replay.len(),
+            )
+            .map_err(|e| bad(&meta_path, format!("replay priorities: {e}")))?,
+        ),
+        (held, _) => {
+            let with = |p: bool| if p { "prioritised" } else { "uniform" };
+            return Err(bad(
+                &meta_path,
+                format!(
+                    "the checkpoint's replay is {}, the run asks for {} replay \
+                     (train.priority_alpha = {})",
+                    with(held.is_some()),
+                    with(held.is_none()),
+                    config.priority_alpha
+                ),
+            ));
+        }
+    };
+    let replay = replay.with_priorities(priorities);
     let stacks = std::iter::once(&meta.stack)
         .chain(meta.more_envs.iter().map(|s| &s.stack))
         .chain(meta.pending.iter().map(|p| &p.obs))

@@ -162,6 +162,7 @@ impl TrainEnvs {
             pending: Vec::new(),
             world: 0,
             more_envs: Vec::new(),
+            priorities: None,
             replay_bytes: 0,
             replay_checksum: 0,
         };

@@ -75,6 +75,19 @@ pub struct TrainConfig {
     /// and what `mdrlat eval --checkpoint` reads; exploration and the TD targets use the
     /// online network as always.
     pub average_horizon: u64,
+    /// Prioritised replay (Schaul et al. 2016, proportional; [`crate::priority`]): a
+    /// transition is drawn with probability in proportion to `(|δ| + priority_epsilon)^α`,
+    /// `δ` its last TD error, and its TD loss weighs `(N · P)^−β`. 0: uniform replay (the
+    /// paper's); up to 1.
+    pub priority_alpha: f32,
+    /// β of the importance-sampling weights at step 0, annealed linearly to 1 over
+    /// `priority_beta_steps` (with `priority_alpha` > 0). In [0, 1].
+    pub priority_beta: f32,
+    /// Environment steps over which β reaches 1 (fixed, not `total_steps`, so that a run
+    /// extended with `--resume --steps` goes on as one long run would).
+    pub priority_beta_steps: u64,
+    /// The offset ε of the priorities, so that no transition's is 0. Positive.
+    pub priority_epsilon: f32,
     /// Steps between greedy evaluations (Fig. 4).
     pub eval_interval: u64,
     /// Episodes per evaluation, from fixed start poses.
@@ -162,6 +175,10 @@ impl Default for TrainConfig {
             aux_loss_weight: 1.0,
             aux_optimizer: AuxOptimizer::Separate,
             average_horizon: 0,
+            priority_alpha: 0.0,
+            priority_beta: 0.4,
+            priority_beta_steps: 100_000,
+            priority_epsilon: 0.01,
             eval_interval: 5_000,
             eval_episodes: 5,
             eval_seed: 1_000_000,
@@ -334,6 +351,20 @@ impl TrainConfig {
         if !(0.0..=1.0).contains(&self.demo_share) {
             return err("train.demo_share", format!("must be in [0, 1], got {}", self.demo_share));
         }
+        for (field, v) in [
+            ("train.priority_alpha", self.priority_alpha),
+            ("train.priority_beta", self.priority_beta),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return err(field, format!("must be in [0, 1], got {v}"));
+            }
+        }
+        if !(self.priority_epsilon.is_finite() && self.priority_epsilon > 0.0) {
+            return err(
+                "train.priority_epsilon",
+                format!("must be positive, got {}", self.priority_epsilon),
+            );
+        }
         if self.n_step == 0 || self.n_step > 16 {
             return err("train.n_step", format!("must be in 1..=16, got {}", self.n_step));
         }
@@ -385,6 +416,23 @@ impl TrainConfig {
             min_path_m: self.curve_min_path_m,
             min_reach_m: self.curve_min_reach_m,
         }
+    }
+
+    /// β of the importance-sampling weights at `step` (see [`TrainConfig::priority_beta`]).
+    pub fn priority_beta_at(&self, step: u64) -> f32 {
+        let f = (step as f64 / self.priority_beta_steps.max(1) as f64).min(1.0) as f32;
+        self.priority_beta + f * (1.0 - self.priority_beta)
+    }
+
+    /// The replay's priorities for a run with these settings (`None`: uniform replay).
+    pub fn priorities(&self) -> Option<crate::priority::Priorities> {
+        (self.priority_alpha > 0.0).then(|| {
+            crate::priority::Priorities::new(
+                self.replay_capacity,
+                self.priority_alpha,
+                self.priority_epsilon,
+            )
+        })
     }
 
     /// ε at environment step `step` (linear decay, then constant).

@@ -37,11 +37,14 @@ pub struct Losses {
 struct PendingLosses(Tensor<1>);
 
 impl PendingLosses {
-    fn read(self) -> Losses {
+    /// The losses, and what follows them in the tensor (the rows' TD errors where they
+    /// were asked for).
+    fn read(self) -> (Losses, Vec<f32>) {
         let data = self.0.into_data().convert_dtype(mdrlat_nn::burn::tensor::DType::F32);
         let v = data.try_to_vec::<f32>().unwrap_or_default();
         let at = |i: usize| v.get(i).copied().unwrap_or(f32::NAN);
-        Losses { td: at(0), at: at(1), q_mean: at(2) }
+        let rest = v.get(3..).map(<[f32]>::to_vec).unwrap_or_default();
+        (Losses { td: at(0), at: at(1), q_mean: at(2) }, rest)
     }
 }
 
@@ -125,6 +128,9 @@ pub struct Learner {
     updates: u64,
     /// See [`Learner::phase_times`].
     phase_ms: [f64; 3],
+    /// The last gradient step's TD errors `y − Q(s, a)`, one per row, where its batch had
+    /// importance-sampling weights (prioritised replay); empty otherwise.
+    td_errors: Vec<f32>,
     /// Independent forwards run on two threads: on burn's `flex` CPU backend each leaves a
     /// core idle in its single-threaded stretches (a measurably shorter MDRLAT step on 2
     /// cores; `docs/performance.md`); LibTorch already spreads every kernel over all cores
@@ -418,6 +424,7 @@ impl Learner {
             aux_weight: config.aux_loss_weight,
             updates: 0,
             phase_ms: [0.0; 3],
+            td_errors: Vec::new(),
             side_by_side,
             host_kernels: true,
             depth_table: std::sync::OnceLock::new(),
@@ -448,6 +455,13 @@ impl Learner {
     /// Gradient steps taken.
     pub fn updates(&self) -> u64 {
         self.updates
+    }
+
+    /// The last gradient step's TD errors `y − Q(s, a)`, one per row of its batch, where
+    /// the batch had importance-sampling weights (prioritised replay: the rows' new
+    /// priorities); empty otherwise.
+    pub fn td_errors(&self) -> &[f32] {
+        &self.td_errors
     }
 
     /// How this learner wants its batches' depth input: as frames on LibTorch (the CPU or a
@@ -700,7 +714,8 @@ impl Learner {
                 self.online = online;
                 self.plain = self.online.valid();
                 // Read once the Adam step is queued too (a read waits for the device).
-                let losses = losses.read();
+                let (losses, td_errors) = losses.read();
+                self.td_errors = td_errors;
                 self.phase_ms = phase_ms([t0, t1, t2]);
                 losses
             }
@@ -748,7 +763,8 @@ impl Learner {
         batch: &Batch,
         t0: std::time::Instant,
     ) -> Losses {
-        let (tape, dq, dvel, losses) = self.host_losses(&online, target, batch);
+        let (tape, dq, dvel, losses, td_errors) = self.host_losses(&online, target, batch);
+        self.td_errors = td_errors;
         let t1 = std::time::Instant::now();
         if self.optim_aux.is_some() {
             return self.host_update_separate(
@@ -851,7 +867,19 @@ impl Learner {
         );
         let q_sa = out.q.gather(1, actions); // [B, 1]
         let q_mean = q_sa.clone().inner().mean(); // [1]
-        let td = (y - q_sa).square().mean(); // [1]
+        // With prioritised replay each row's square weighs its importance-sampling weight,
+        // and the rows' errors go back with the losses (the replay's new priorities).
+        let (td, errors) = if batch.weights.is_empty() {
+            ((y - q_sa).square().mean(), None) // [1]
+        } else {
+            let w = Tensor::<2>::from_data(
+                TensorData::new(batch.weights.clone(), [b, 1]),
+                &self.train_device,
+            );
+            let err = y - q_sa;
+            let errors = err.clone().inner().reshape([b]);
+            ((err.square() * w).mean(), Some(errors))
+        };
 
         // Lines 13–14, eq. (12): Σ over t−2..t of (v − ṽ)² + (ω − ω̃)².
         let aux_loss = |v_hat: Tensor<2>| {
@@ -877,21 +905,23 @@ impl Learner {
         };
         let grads = GradientsParams::from_grads(loss.backward(), &self.online);
         let at = at.map_or_else(|| Tensor::zeros([1], &self.device), Tensor::inner);
-        let losses = PendingLosses(Tensor::cat(vec![td.inner(), at, q_mean], 0));
+        let parts = [td.inner(), at, q_mean].into_iter().chain(errors).collect();
+        let losses = PendingLosses(Tensor::cat(parts, 0));
         (grads, aux_grads, losses, t1)
     }
 
     /// Lines 7–14 on the host kernels, up to the backward pass: the two eq. (10) forwards on
     /// `s'` beside the online forward on `s`, then the losses and their gradients with
     /// respect to the Q-values and the velocity estimates. The backward pass is
-    /// hand-written (tested equal to burn's autodiff in `mdrlat_nn::host`).
+    /// hand-written (tested equal to burn's autodiff in `mdrlat_nn::host`). Last, the rows'
+    /// TD errors where the batch has importance-sampling weights (else empty).
     #[allow(clippy::type_complexity)]
     fn host_losses<'a>(
         &self,
         online: &HostNet,
         target: &HostNet,
         batch: &'a Batch,
-    ) -> (mdrlat_nn::host::Tape<'a>, Vec<f32>, Option<Vec<f32>>, Losses) {
+    ) -> (mdrlat_nn::host::Tape<'a>, Vec<f32>, Option<Vec<f32>>, Losses, Vec<f32>) {
         let b = batch.size;
         let aux = self.variant.auxiliary_task();
         let (next, now) = (batch_inputs(batch, true), batch_inputs(batch, false));
@@ -908,16 +938,23 @@ impl Learner {
         let online_next = &tape.q()[tape.q().len() / 2..];
         let actions = online_next.len() / b.max(1);
         let y = host_targets(online_next, &target_next, batch, self.gamma);
-        // Eq. (13): mean over the batch of (y − Q(s, a))²; its gradient reaches Q(s, a) only.
+        // Eq. (13): mean over the batch of (y − Q(s, a))², each row's weighted by its
+        // importance-sampling weight with prioritised replay (1 otherwise: the same bits);
+        // its gradient reaches Q(s, a) only.
         let mut dq = vec![0.0f32; b * actions];
         let (mut td, mut q_sum) = (0.0f32, 0.0f32);
+        let mut errors = Vec::new();
         for i in 0..b {
             let a = usize::try_from(batch.actions[i]).unwrap_or(0).min(actions - 1);
             let q_sa = tape.q()[i * actions + a];
             let err = y[i] - q_sa;
-            td += err * err;
+            let w = batch.weights.get(i).copied().unwrap_or(1.0);
+            if !batch.weights.is_empty() {
+                errors.push(err);
+            }
+            td += w * err * err;
             q_sum += q_sa;
-            dq[i * actions + a] = -2.0 * err / b as f32;
+            dq[i * actions + a] = -2.0 * w * err / b as f32;
         }
         let (td, q_mean) = (td / b as f32, q_sum / b as f32);
         // Eq. (12): mean over the batch of Σ_j (v_j − ṽ_j)², weighted into the loss.
@@ -938,7 +975,7 @@ impl Learner {
         } else {
             (0.0, None)
         };
-        (tape, dq, dvel, Losses { td, at, q_mean })
+        (tape, dq, dvel, Losses { td, at, q_mean }, errors)
     }
 
     /// Saves the online and target weights and the Adam moments into `dir` (burnpack files,

@@ -14,6 +14,7 @@ pub mod evaluation;
 pub mod export;
 pub mod learner;
 pub mod policy;
+pub mod priority;
 pub mod replay;
 pub mod run_dir;
 pub mod settings;

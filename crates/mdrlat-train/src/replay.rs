@@ -8,6 +8,7 @@
 //! a stale frame. The navigation task's goal (three numbers in the robot frame) is stored
 //! with each transition, for `s_t` and `s_{t+1}`.
 
+use crate::priority::Priorities;
 use mdrlat_core::{
     DEPTH_LEN, FRAME_STACK, GOAL_DIM, LASER_BEAMS, ODOM_HISTORY, Rng, normalize_depth,
     normalize_goal, normalize_laser,
@@ -81,6 +82,9 @@ pub struct Batch {
     /// The depth frames as stored, for a device that builds the stacks itself
     /// ([`DepthLayout::Frames`]; `depth` and `next_depth` are then empty). Empty otherwise.
     pub depth_frames: DepthFrames,
+    /// `[B]` importance-sampling weights of the TD loss, with prioritised replay
+    /// ([`ReplayBuffer::sample_weighted`]); empty: every row weighs 1.
+    pub weights: Vec<f32>,
 }
 
 /// How a sampled batch carries its depth input.
@@ -145,6 +149,8 @@ pub struct ReplayBuffer {
     /// How many frames before an overwritten one a transition at the front may still hold
     /// (see [`ReplayBuffer::with_envs`]).
     frame_margin: u64,
+    /// The transitions' priorities, with prioritised replay (`train.priority_alpha` > 0).
+    priorities: Option<Priorities>,
 }
 
 /// Metres to millimetres, rounded; 0 and negatives stay 0, beyond 65.535 m saturates.
@@ -209,6 +215,59 @@ impl ReplayBuffer {
             keep_depth,
             keep_goal: false,
             frame_margin: 0,
+            priorities: None,
+        }
+    }
+
+    /// The same buffer drawing transitions in proportion to their priorities
+    /// (`p = (|δ| + epsilon)^alpha`, [`crate::priority`]), or uniformly with `None`.
+    pub fn with_priorities(mut self, priorities: Option<Priorities>) -> Self {
+        self.priorities = priorities;
+        self
+    }
+
+    /// The priorities, with prioritised replay.
+    pub fn priorities(&self) -> Option<&Priorities> {
+        self.priorities.as_ref()
+    }
+
+    /// Draws `batch` transition indices in proportion to their priorities, with their
+    /// importance-sampling weights at exponent `beta` ([`Priorities`]); uniformly with
+    /// replacement and no weights (empty) without prioritised replay, as
+    /// [`ReplayBuffer::sample_indices`].
+    ///
+    /// # Panics
+    /// If the buffer is empty.
+    pub fn sample_weighted(
+        &self,
+        batch: usize,
+        beta: f32,
+        rng: &mut Rng,
+    ) -> (Vec<usize>, Vec<f32>) {
+        match &self.priorities {
+            Some(p) => {
+                assert!(!self.is_empty(), "sampling an empty replay buffer");
+                p.sample(self.len(), batch, beta, rng)
+            }
+            None => (self.sample_indices(batch, rng), Vec::new()),
+        }
+    }
+
+    /// New priorities from the TD errors of the transitions at `indices` (a batch just
+    /// drawn by [`ReplayBuffer::sample_weighted`], before anything was stored); nothing
+    /// without prioritised replay.
+    pub fn update_priorities(&mut self, indices: &[usize], td_errors: &[f32]) {
+        if let Some(p) = &mut self.priorities {
+            p.update(indices, td_errors);
+        }
+    }
+
+    /// Drops the oldest transition (and its priority).
+    fn pop_front(&mut self) {
+        if self.transitions.pop_front().is_some()
+            && let Some(p) = &mut self.priorities
+        {
+            p.remove_front();
         }
     }
 
@@ -271,7 +330,7 @@ impl ReplayBuffer {
             let overwritten = id - self.frame_slots as u64;
             let reach = overwritten + self.frame_margin;
             while self.transitions.front().is_some_and(|t| t.oldest_frame() <= reach) {
-                self.transitions.pop_front();
+                self.pop_front();
             }
         }
         let s = self.slot(id);
@@ -311,7 +370,10 @@ impl ReplayBuffer {
     pub fn push(&mut self, t: Transition) {
         assert!(self.is_live(&t), "transition refers to frames not in the buffer: {t:?}");
         if self.transitions.len() == self.capacity {
-            self.transitions.pop_front();
+            self.pop_front();
+        }
+        if let Some(p) = &mut self.priorities {
+            p.push(self.transitions.len());
         }
         self.transitions.push_back(t);
     }

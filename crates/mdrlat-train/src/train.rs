@@ -174,10 +174,15 @@ pub fn train_until(
                 && t.is_multiple_of(config.train_frequency)
             {
                 for _ in 0..config.gradient_steps {
-                    let idx = replay.sample_indices(config.batch_size, &mut run.sample_rng);
+                    // Uniform (the paper's), or by priority with importance-sampling weights.
+                    let beta = config.priority_beta_at(t);
+                    let (idx, weights) =
+                        replay.sample_weighted(config.batch_size, beta, &mut run.sample_rng);
                     replay.write_batch_as(&idx, &mut batch, learner.depth_layout());
+                    batch.weights = weights;
                     clock.split(|t| &mut t.sampling);
                     status.losses = learner.update(&batch);
+                    replay.update_priorities(&idx, learner.td_errors());
                     run.window.add_losses(&status.losses);
                 }
             }
@@ -310,6 +315,7 @@ fn empty_replay(config: &TrainConfig, task: Task) -> ReplayBuffer {
     ReplayBuffer::new(cap, frame_reserve(cap), v.uses_laser(), v.uses_depth())
         .with_goals(task == Task::Nav)
         .with_envs(config.envs, config.n_step as usize)
+        .with_priorities(config.priorities())
 }
 
 #[cfg(test)]

@@ -380,3 +380,52 @@ fn a_checkpoint_keeps_its_optimisers() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Prioritised replay's importance-sampling weights: the TD loss is the weighted mean of the
+/// rows' squared errors, the rows' errors `y − Q(s, a)` come back for the new priorities
+/// (none without weights), weights of 1 take the very step of no weights (the same bits),
+/// and the host kernels and burn's autodiff agree.
+#[test]
+fn importance_weights_scale_each_rows_td_loss_and_the_errors_come_back() {
+    for variant in [Variant::LaserOnly, Variant::MultiAt] {
+        let cfg = TrainConfig { variant, ..TrainConfig::default() };
+        let mut rng = Rng::seed_from_u64(5);
+        let plain = batch(6, &[0.0, 1.0, 0.0, 0.0, 0.0, 1.0], &mut rng, variant.uses_depth());
+        let ones = Batch { weights: vec![1.0; 6], ..plain.clone() };
+        let w = vec![1.0, 0.5, 0.25, 1.0, 0.1, 0.75];
+        let weighted = Batch { weights: w.clone(), ..plain.clone() };
+        let mut errors = Vec::new();
+        for host in [true, false] {
+            let learner = || {
+                let mut l = Learner::new(&cfg, Task::Avoid, &Device::flex());
+                l.set_host_kernels(host);
+                l
+            };
+            let (mut a, mut b, mut c) = (learner(), learner(), learner());
+            let la = a.update(&plain);
+            assert!(a.td_errors().is_empty(), "no weights, no errors");
+            let lb = b.update(&ones);
+            if host {
+                assert_eq!(la, lb, "weights of 1 are no weights");
+                assert_eq!(weights(&a.policy_net()), weights(&b.policy_net()));
+            } else {
+                assert!((la.td - lb.td).abs() <= 1e-6 * la.td.abs().max(1.0));
+            }
+            // The errors of the unweighted step, and the loss they make with the weights.
+            let e = b.td_errors().to_vec();
+            assert_eq!(e.len(), 6);
+            let expect = e.iter().zip(&w).map(|(e, w)| w * e * e).sum::<f32>() / 6.0;
+            let lc = c.update(&weighted);
+            assert!(
+                (lc.td - expect).abs() <= 1e-4 * expect.max(1.0),
+                "{variant}: {} vs {expect}",
+                lc.td
+            );
+            assert_eq!(c.td_errors().len(), 6);
+            errors.push(e);
+        }
+        let worst =
+            errors[0].iter().zip(&errors[1]).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "{variant}: host and autodiff errors differ by {worst}");
+    }
+}
