@@ -75,20 +75,24 @@ pub struct Priorities {
     tree: SumTree,
     /// The largest priority given so far (a new transition's).
     max: f64,
-    /// Transitions that have left the front of the buffer since it was created: the
-    /// transition at index `i` (oldest first) has leaf `(removed + i) % capacity`.
+    /// Transitions that have left the front of the buffer since it was created, modulo the
+    /// capacity: the transition at index `i` (oldest first) has leaf
+    /// `(removed + i) % capacity`.
     removed: u64,
 }
 
-/// What a checkpoint keeps of [`Priorities`]: enough to rebuild the same tree.
+/// What a checkpoint keeps of [`Priorities`]: enough to rebuild the same tree. The
+/// priorities are kept as the bits of their `f64` (`f64::to_bits`): a decimal text read
+/// back may differ in the last bit, and a resumed run must draw what the run would have.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PriorityState {
-    /// Transitions removed from the front so far (fixes each one's leaf).
+    /// Transitions removed from the front so far, modulo the capacity (fixes each one's
+    /// leaf).
     pub removed: u64,
-    /// The largest priority so far.
-    pub max: f64,
-    /// Each held transition's priority `p_i`, oldest first.
-    pub values: Vec<f64>,
+    /// The bits of the largest priority so far.
+    pub max_bits: u64,
+    /// The bits of each held transition's priority `p_i`, oldest first.
+    pub value_bits: Vec<u64>,
 }
 
 impl Priorities {
@@ -106,7 +110,7 @@ impl Priorities {
     pub(crate) fn remove_front(&mut self) {
         let leaf = self.leaf(0);
         self.tree.set(leaf, 0.0);
-        self.removed += 1;
+        self.removed = (self.removed + 1) % self.capacity as u64;
     }
 
     /// A transition was stored at `index` (the buffer's length before it): it gets the
@@ -139,7 +143,7 @@ impl Priorities {
     ) -> (Vec<usize>, Vec<f32>) {
         let total = self.tree.total();
         let slice = total / batch as f64;
-        let first = (self.removed % self.capacity as u64) as usize;
+        let first = self.removed as usize;
         let mut indices = Vec::with_capacity(batch);
         let mut weights = Vec::with_capacity(batch);
         for j in 0..batch {
@@ -174,8 +178,8 @@ impl Priorities {
     pub fn state(&self, len: usize) -> PriorityState {
         PriorityState {
             removed: self.removed,
-            max: self.max,
-            values: (0..len).map(|i| self.get(i)).collect(),
+            max_bits: self.max.to_bits(),
+            value_bits: (0..len).map(|i| self.get(i).to_bits()).collect(),
         }
     }
 
@@ -183,8 +187,8 @@ impl Priorities {
     /// transitions.
     ///
     /// # Errors
-    /// A state of another length, or a priority that is negative, non-finite or above the
-    /// largest.
+    /// A state of another length, a `removed` count beyond the capacity, or a priority that
+    /// is not positive, not finite or above the largest.
     pub fn restore(
         capacity: usize,
         alpha: f32,
@@ -192,19 +196,26 @@ impl Priorities {
         state: &PriorityState,
         len: usize,
     ) -> Result<Self, String> {
-        if state.values.len() != len {
+        if state.value_bits.len() != len {
             return Err(format!(
                 "{} priorities for {len} replayed transitions",
-                state.values.len()
+                state.value_bits.len()
             ));
         }
-        if !(state.max.is_finite() && state.max > 0.0) {
-            return Err(format!("bad largest priority {}", state.max));
+        if state.removed >= capacity.max(1) as u64 {
+            return Err(format!(
+                "removed count {} is not below the capacity {capacity}",
+                state.removed
+            ));
+        }
+        let max = f64::from_bits(state.max_bits);
+        if !(max.is_finite() && max > 0.0) {
+            return Err(format!("bad largest priority {max}"));
         }
         let mut p = Self::new(capacity, alpha, epsilon);
-        (p.removed, p.max) = (state.removed, state.max);
-        for (i, &v) in state.values.iter().enumerate() {
-            if !(v.is_finite() && v > 0.0 && v <= state.max) {
+        (p.removed, p.max) = (state.removed, max);
+        for (i, v) in state.value_bits.iter().map(|&b| f64::from_bits(b)).enumerate() {
+            if !(v.is_finite() && v > 0.0 && v <= max) {
                 return Err(format!("bad priority {v} of transition {i}"));
             }
             let leaf = p.leaf(i);
@@ -294,15 +305,23 @@ mod tests {
             p.update(&idx, &td);
         }
         let state = p.state(5);
+        // Through the checkpoint's JSON: the same bits (decimals might lose the last one).
+        let text = serde_json::to_string(&state).expect("json");
+        let state: PriorityState = serde_json::from_str(&text).expect("json");
         let back = Priorities::restore(5, 0.6, 0.001, &state, 5).expect("restore");
         assert_eq!(back, p);
+        assert!((0..5).any(|i| p.get(i) != p.max), "learned priorities, not only new ones");
         assert!(Priorities::restore(5, 0.6, 0.001, &state, 4).is_err());
         let mut bad = state.clone();
-        bad.values[2] = f64::NAN;
+        bad.value_bits[2] = f64::NAN.to_bits();
         let e = Priorities::restore(5, 0.6, 0.001, &bad, 5).expect_err("a NaN priority");
         assert!(e.contains("transition 2"), "{e}");
-        let mut bad = state;
-        bad.values[0] = bad.max * 2.0;
+        let mut bad = state.clone();
+        bad.value_bits[0] = (f64::from_bits(bad.max_bits) * 2.0).to_bits();
         assert!(Priorities::restore(5, 0.6, 0.001, &bad, 5).is_err());
+        let mut bad = state;
+        bad.removed = u64::MAX;
+        let e = Priorities::restore(5, 0.6, 0.001, &bad, 5).expect_err("a corrupt count");
+        assert!(e.contains("removed"), "{e}");
     }
 }

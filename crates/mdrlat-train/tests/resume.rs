@@ -735,11 +735,11 @@ fn a_run_with_prioritised_replay_resumes_exactly() {
     let meta = |d: &Path| read(&d.join("checkpoint"), "meta.json");
     assert_eq!(meta(&straight), meta(&cut), "same priorities, counters and streams");
     let m: serde_json::Value = serde_json::from_str(&meta(&straight)).expect("json");
-    let values = m["priorities"]["values"].as_array().expect("priorities in meta.json");
+    let values = m["priorities"]["value_bits"].as_array().expect("priorities in meta.json");
     assert_eq!(values.len(), 120, "a full buffer's");
     // Learned priorities differ from one another (new transitions start at the largest).
-    let first = values[0].as_f64().expect("number");
-    assert!(values.iter().any(|v| v.as_f64() != Some(first)), "{values:?}");
+    let first = values[0].as_u64().expect("bits");
+    assert!(values.iter().any(|v| v.as_u64() != Some(first)), "{values:?}");
     // The draw by priority changes the run.
     let uniform = dir("per-uniform");
     let (_, u) = train(
